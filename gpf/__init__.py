@@ -1,0 +1,1 @@
+"""Gaussian particle filter hardware: configs, generator, models and testbenches."""

@@ -1,0 +1,253 @@
+"""One typed, validated design config, loaded from TOML.
+
+Every key is declared once in the schema below; an unknown key, a wrong type or a value out of
+range raises ConfigError with one line naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gpf.model.fixed import Format
+
+
+class ConfigError(ValueError):
+    """A config that cannot be used; str() is one line for the user."""
+
+
+@dataclass(frozen=True)
+class Key:
+    """One config key: its type, what values are allowed, and its default (None: required)."""
+
+    kind: type | tuple[type, ...]
+    allowed: str
+    check: Callable[[Any], bool] = lambda v: True
+    default: Any = None
+
+
+def _int_range(lo: int, hi: int, default: int | None = None) -> Key:
+    return Key(int, f"an integer in [{lo}, {hi}]", lambda v: lo <= v <= hi, default)
+
+
+def _choice(*options: Any, default: Any = None) -> Key:
+    kind = type(options[0])
+    return Key(kind, "one of " + ", ".join(repr(o) for o in options), lambda v: v in options,
+               default)
+
+
+def _positive_float(default: float | None = None) -> Key:
+    return Key((int, float), "a number > 0", lambda v: math.isfinite(v) and v > 0, default)
+
+
+def _vector(n: int, positive: bool = False) -> Key:
+    what = f"a list of {n} {'positive ' if positive else ''}numbers"
+    return Key(list, what, lambda v: len(v) == n and all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+        and (x > 0 or not positive) for x in v))
+
+
+def _format_key(default: str | None = None) -> Key:
+    def ok(text: str) -> bool:
+        try:
+            fmt = Format.parse(text)
+        except ValueError:
+            return False
+        return fmt.width <= 64
+
+    return Key(str, "a fixed-point format sI.F or uI.F of at most 64 bits, e.g. 's3.20'", ok,
+               default)
+
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "filter": {
+        "app": _choice("bot", "uav"),
+        "particles": _int_range(2, 1 << 16),
+        "lanes": _choice(1, 2, 4),
+        "steps": _int_range(1, 100_000),
+        "dt": _positive_float(),
+    },
+    "formats": {
+        # bot: one format for the whole state [px, vx, py, vy]; uav: quaternion and velocity
+        "state": _format_key(default=""),
+        "quaternion": _format_key(default=""),
+        "velocity": _format_key(default=""),
+        "weight": _format_key(),
+        "noise": _format_key(),
+    },
+    "grng": {
+        "seed": _int_range(0, (1 << 64) - 1),
+        # inversion LUT: octaves of the uniform's leading-zero count, segments per octave
+        "octaves": _int_range(32, 56, default=48),
+        "segment_bits": _int_range(2, 6, default=4),
+        "offset_bits": _int_range(8, 17, default=17),
+        "guard_bits": _int_range(0, 12, default=6),
+    },
+    "bot": {
+        "process_var": _positive_float(),
+        "bearing_var": _positive_float(),
+        "x0": _vector(4),
+        "sigma0_diag": _vector(4, positive=True),
+    },
+    "uav": {
+        "sigma_omega_deg": _positive_float(),
+        "sigma_a": _positive_float(),
+        "sigma_v": _positive_float(),
+        "covariance": _choice("full", "block"),
+    },
+}
+
+APP_FORMATS = {"bot": ("state",), "uav": ("quaternion", "velocity")}
+
+
+@dataclass(frozen=True)
+class GrngConfig:
+    seed: int
+    octaves: int
+    segment_bits: int
+    offset_bits: int
+    guard_bits: int
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated design config. `name` is the config file's stem (the build folder's name)."""
+
+    name: str
+    source: str
+    app: str
+    particles: int
+    lanes: int
+    steps: int
+    dt: float
+    formats: dict[str, Format]
+    grng: GrngConfig
+    app_params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def noise(self) -> Format:
+        return self.formats["noise"]
+
+    @property
+    def weight(self) -> Format:
+        return self.formats["weight"]
+
+
+def _type_name(kind: type | tuple[type, ...]) -> str:
+    names = {int: "integer", float: "number", str: "string", list: "list"}
+    if isinstance(kind, tuple):
+        return " or ".join(names[k] for k in kind)
+    return names[kind]
+
+
+def _check_key(where: str, key: Key, value: Any) -> Any:
+    # bool is an int in Python; a config never means True for a number
+    kinds = key.kind if isinstance(key.kind, tuple) else (key.kind,)
+    if isinstance(value, bool) or not isinstance(value, kinds):
+        raise ConfigError(f"{where} = {value!r}: expected {_type_name(key.kind)}, "
+                          f"{key.allowed}")
+    if not key.check(value):
+        raise ConfigError(f"{where} = {value!r}: must be {key.allowed}")
+    return value
+
+
+def _read_sections(doc: dict[str, Any], prefix: str) -> dict[str, dict[str, Any]]:
+    values: dict[str, dict[str, Any]] = {}
+    for section in doc:
+        if section not in SCHEMA:
+            raise ConfigError(f"{prefix}unknown section [{section}]: allowed sections are "
+                              + ", ".join(SCHEMA))
+        if not isinstance(doc[section], dict):
+            raise ConfigError(f"{prefix}{section} = {doc[section]!r}: expected a [{section}] "
+                              "table")
+    app = doc.get("filter", {}).get("app")
+    for section, keys in SCHEMA.items():
+        table = doc.get(section)
+        if section in APP_FORMATS and section != app:
+            if table is not None:
+                raise ConfigError(f"{prefix}[{section}] given for app {app!r}: "
+                                  f"only [{app}] is allowed")
+            continue
+        if table is None:
+            raise ConfigError(f"{prefix}missing section [{section}]")
+        for name in table:
+            if name not in keys:
+                raise ConfigError(f"{prefix}{section}.{name}: unknown key; allowed keys are "
+                                  + ", ".join(keys))
+        values[section] = {}
+        for name, key in keys.items():
+            if name in table:
+                values[section][name] = _check_key(f"{prefix}{section}.{name}", key,
+                                                   table[name])
+            elif key.default is None:
+                raise ConfigError(f"{prefix}{section}.{name}: missing; must be {key.allowed}")
+            else:
+                values[section][name] = key.default
+    return values
+
+
+def _check_formats(values: dict[str, dict[str, Any]], app: str, prefix: str) -> dict[str, Format]:
+    fmts = values["formats"]
+    needed = {*APP_FORMATS[app], "weight", "noise"}
+    for name in fmts:
+        if name not in needed and fmts[name]:
+            raise ConfigError(f"{prefix}formats.{name} = {fmts[name]!r}: not used by app "
+                              f"{app!r}; its formats are " + ", ".join(sorted(needed)))
+    for name in needed:
+        if not fmts[name]:
+            raise ConfigError(f"{prefix}formats.{name}: missing; app {app!r} needs it")
+    out = {name: Format.parse(fmts[name]) for name in sorted(needed)}
+    noise = out["noise"]
+    # the inversion GRNG reaches 7.9 sigma: three integer bits, signed, one DSP operand at most
+    if not (noise.signed and noise.int_bits == 3 and 4 <= noise.frac_bits <= 20):
+        raise ConfigError(f"{prefix}formats.noise = {fmts['noise']!r}: must be s3.F with "
+                          "F in [4, 20]")
+    if out["weight"].signed:
+        raise ConfigError(f"{prefix}formats.weight = {fmts['weight']!r}: must be unsigned "
+                          "(uI.F)")
+    return out
+
+
+def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = "") -> Config:
+    """Validate a parsed TOML document; raise ConfigError on the first problem."""
+    prefix = f"{source}: " if source else ""
+    values = _read_sections(doc, prefix)
+    flt = values["filter"]
+    if flt["particles"] % flt["lanes"]:
+        raise ConfigError(f"{prefix}filter.particles = {flt['particles']}: must be a multiple "
+                          f"of filter.lanes = {flt['lanes']}")
+    formats = _check_formats(values, flt["app"], prefix)
+    g = values["grng"]
+    return Config(
+        name=name,
+        source=source,
+        app=flt["app"],
+        particles=flt["particles"],
+        lanes=flt["lanes"],
+        steps=flt["steps"],
+        dt=float(flt["dt"]),
+        formats=formats,
+        grng=GrngConfig(**g),
+        app_params=values[flt["app"]],
+    )
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+    """Load and validate a TOML config. `overrides` maps 'section.key' to a value."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    for dotted, value in (overrides or {}).items():
+        section, _, key = dotted.partition(".")
+        doc.setdefault(section, {})[key] = value
+    return config_from_dict(doc, name=path.stem, source=str(path))

@@ -1,0 +1,92 @@
+"""Running a block's cocotb testbench on Verilator or Icarus, each config in its own folder.
+
+build/<config>/rtl/              generated SystemVerilog, file lists, manifest.json
+build/<config>/<sim>/<module>/   simulator build, results.xml, sim.log, waves (<module>.fst)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gpf.config import Config
+from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
+from gpf.toolchain import check_simulator, use_bundled_verilator
+
+SIMULATORS = ("verilator", "icarus")
+
+
+@dataclass(frozen=True)
+class SimResult:
+    module: str
+    sim: str
+    seed: int
+    tests: int
+    failed: int
+    results_xml: Path
+    waves: Path | None
+
+    @property
+    def passed(self) -> bool:
+        return self.tests > 0 and self.failed == 0
+
+
+def test_module(module: str) -> str:
+    return f"gpf.tb.{module}.test_{module}"
+
+
+def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = False,
+            seed: int | None = None, testcase: str | None = None,
+            overrides: dict[str, Any] | None = None, extra_env: dict[str, str] | None = None,
+            template_dir: Path | None = None, build_root: Path = Path("build"),
+            log_file: Path | None = None) -> SimResult:
+    """Generate the RTL, build it for `sim` and run the module's cocotb tests.
+
+    `template_dir` and `build_root` let a test simulate mutated templates out of the way.
+    With `log_file` the simulator's output goes there instead of the terminal.
+    """
+    if module not in MODULES:
+        raise ValueError(f"unknown module {module!r}: choose one of {', '.join(MODULES)}")
+    check_simulator(sim, waves)
+    use_bundled_verilator()
+    from cocotb_tools.runner import get_results, get_runner  # after PATH holds Verilator
+
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "little")
+    config_dir = (build_root / cfg.name).resolve()
+    generated = generate(cfg, config_dir / "rtl", [module],
+                         template_dir=template_dir or TEMPLATE_DIR)
+    build_dir = config_dir / sim / module
+    build_dir.mkdir(parents=True, exist_ok=True)
+    top = MODULES[module].top
+    runner = get_runner(sim)
+    build_args = ["--trace-fst", "--trace-structs"] if waves and sim == "verilator" else []
+    runner.build(sources=generated.files[module], hdl_toplevel=top, build_dir=build_dir,
+                 always=True, waves=waves, build_args=build_args, timescale=("1ns", "1ps"),
+                 log_file=log_file)
+    waves_file = build_dir / f"{module}.fst"
+    env = {
+        "GPF_CONFIG": str(Path(cfg.source).resolve()),
+        "GPF_OVERRIDES": json.dumps(overrides or {}),
+        "GPF_MANIFEST": str(generated.out_dir / "manifest.json"),
+        "GPF_MODULE": module,
+        "TEST_LEVEL": os.environ.get("TEST_LEVEL", "default"),
+        **(extra_env or {}),
+    }
+    # cocotb's runner exits the process on failures when it sees pytest; we report instead
+    hidden = os.environ.pop("PYTEST_CURRENT_TEST", None)
+    try:
+        xml = runner.test(
+            test_module=test_module(module), hdl_toplevel=top, test_dir=build_dir,
+            build_dir=build_dir, seed=seed, testcase=testcase, waves=waves,
+            test_args=["--trace-file", str(waves_file)] if waves and sim == "verilator" else [],
+            plusargs=[f"+dumpfile_path={waves_file}"] if waves and sim == "icarus" else [],
+            extra_env=env, results_xml=str(build_dir / "results.xml"), log_file=log_file)
+    finally:
+        if hidden is not None:
+            os.environ["PYTEST_CURRENT_TEST"] = hidden
+    tests, failed = get_results(Path(xml))
+    return SimResult(module, sim, seed, tests, failed, Path(xml), waves_file if waves else None)

@@ -1,0 +1,1 @@
+"""Fixed-point and float64 reference models."""

@@ -1,0 +1,1 @@
+"""RTL generator: config -> derived constants -> Jinja2 templates -> SystemVerilog."""

@@ -1,0 +1,162 @@
+"""Generator: config -> derived constants -> Jinja2 templates -> SystemVerilog + manifest.
+
+Logic lives here and in the models; templates only place the numbers. The derived constants come
+from the same model objects the testbenches check against, so no constant is typed twice.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jinja2
+
+from gpf.config import Config
+from gpf.model import grng as grng_model
+
+TEMPLATE_DIR = Path(__file__).parent / "templates"
+
+
+@dataclass(frozen=True)
+class Module:
+    """A block the user can simulate: its top, the templates it renders (dependencies first)."""
+
+    top: str
+    parts: tuple[str, ...]
+    context: Callable[[Config], dict[str, Any]]
+
+
+def grng_context(cfg: Config) -> dict[str, Any]:
+    model = grng_model.GrngModel(cfg)
+    seg = model.seg
+    c0_w, c1_w, c2_w = model.coef_widths
+    s1_w, s2_w = model.sum_widths
+    max_mag = int(model._horner(
+        # |z| is largest at the far end of the table; checked here so the RTL never wraps
+        *_table_ends(seg.depth, seg.offset_bits)).max())
+    if max_mag > cfg.noise.max_raw:
+        raise ValueError(f"grng: |z| reaches raw {max_mag}, beyond {cfg.noise}")
+    rom_w = c0_w + c1_w + c2_w
+    rom = []
+    for c0, c1, c2 in model.lut.tolist():
+        word = (_twos(c2, c2_w) << (c1_w + c0_w)) | (_twos(c1, c1_w) << c0_w) | _twos(c0, c0_w)
+        rom.append(f"{word:0{(rom_w + 3) // 4}X}")
+    return {
+        "lanes": cfg.lanes,
+        "lane_w": max(1, math.ceil(math.log2(cfg.lanes))),
+        "out_fmt": str(cfg.noise),
+        "out_w": cfg.noise.width,
+        "latency": grng_model.LATENCY,
+        "components": grng_model.COMPONENTS,
+        "seed": cfg.grng.seed,
+        "reset_state": [f"{word:016X}" for word in model.reset_state()],
+        "lfsr": [
+            {"q": q, "s": s, "k": k, "mask_hex": f"{mask:016X}", "force_hex": f"{1 << bit:016X}"}
+            for (q, s, k, mask), bit in zip(grng_model.LFSR258, grng_model.SEED_FORCE_BIT,
+                                            strict=True)
+        ],
+        "octaves": seg.octaves,
+        "segment_bits": seg.segment_bits,
+        "offset_bits": seg.offset_bits,
+        "guard_bits": model.guard_bits,
+        "coef_frac": model.coef_frac,
+        "depth": seg.depth,
+        "addr_w": math.ceil(math.log2(seg.octaves)) + seg.segment_bits,
+        "c0_w": c0_w,
+        "c1_w": c1_w,
+        "c2_w": c2_w,
+        "s1_w": s1_w,
+        "s2_w": s2_w,
+        "rom_w": rom_w,
+        "rom": rom,
+    }
+
+
+def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
+    import numpy as np
+
+    addr = np.repeat(np.arange(depth), 2)
+    x = np.tile([0, (1 << offset_bits) - 1], depth)
+    return addr, x
+
+
+def _twos(value: int, width: int) -> int:
+    return value & ((1 << width) - 1)
+
+
+MODULES: dict[str, Module] = {
+    "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "grng"), grng_context),
+}
+
+
+def _environment(template_dir: Path) -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(template_dir)),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+
+
+@dataclass(frozen=True)
+class Generated:
+    out_dir: Path
+    files: dict[str, list[Path]]  # module -> its SystemVerilog files, dependencies first
+    manifest: dict[str, Any]
+
+
+def default_out_dir(cfg: Config) -> Path:
+    return Path("build") / cfg.name / "rtl"
+
+
+def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None = None,
+             template_dir: Path = TEMPLATE_DIR) -> Generated:
+    """Render every module (or the named ones) for `cfg` into `out_dir`.
+
+    Writes <part>.sv per template, <module>.f file lists, manifest.json and config.toml.
+    Files are rendered in memory first, so a failure leaves nothing half-written.
+    """
+    out_dir = Path(out_dir) if out_dir is not None else default_out_dir(cfg)
+    names = modules if modules is not None else list(MODULES)
+    env = _environment(template_dir)
+    config_file = Path(cfg.source).name if cfg.source else f"{cfg.name}.toml"
+    texts: dict[str, str] = {}
+    files: dict[str, list[Path]] = {}
+    manifest: dict[str, Any] = {
+        "config": {"name": cfg.name, "file": config_file},
+        "app": cfg.app,
+        "lanes": cfg.lanes,
+        "particles": cfg.particles,
+        "formats": {name: str(fmt) for name, fmt in cfg.formats.items()},
+        "modules": {},
+    }
+    for name in names:
+        module = MODULES[name]
+        context = module.context(cfg)
+        for part in module.parts:
+            texts[f"{part}.sv"] = env.get_template(f"{part}.sv.j2").render(
+                module=part, config_file=config_file, config_name=cfg.name, **context)
+        files[name] = [out_dir / f"{part}.sv" for part in module.parts]
+        texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.parts)
+        manifest["modules"][name] = {
+            "top": module.top,
+            "files": [f"{part}.sv" for part in module.parts],
+            "latency": context.get("latency"),
+            "constants": {k: v for k, v in context.items()
+                          if isinstance(v, int | str) and k not in ("lanes",)},
+        }
+    texts["manifest.json"] = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
+    if cfg.source:
+        texts["config.toml"] = Path(cfg.source).read_text()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for fname, text in texts.items():
+        path = out_dir / fname
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+    return Generated(out_dir, files, manifest)

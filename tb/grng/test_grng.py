@@ -1,0 +1,172 @@
+"""cocotb testbench of `grng`: every sample of every lane checked bit-exactly against GrngModel.
+
+The model is fed from the seed words seen on the seed bus (not from what the driver meant to
+send), the samples from what crossed the output bus; the scoreboard compares them in order.
+"""
+
+from __future__ import annotations
+
+import cocotb
+import numpy as np
+from cocotb.handle import SimHandleBase
+from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge
+
+from gpf.model.fixed import shift_round
+from gpf.model.grng import COMPONENTS, GrngModel
+from gpf.tb.harness import Bench, bench, start
+from gpf.tb.scoreboard import Field, Scoreboard, unpack
+from gpf.tb.stream import ReadyDriver, StreamMonitor
+
+
+def samples_per_lane(b: Bench) -> int:
+    return 200_000 if b.long else 10_000
+
+
+def scoreboard(b: Bench, expect_mismatch: bool = False) -> Scoreboard:
+    return Scoreboard("grng", [Field("z", b.cfg.noise)], expect_mismatch=expect_mismatch)
+
+
+async def load_seed(dut: SimHandleBase, words: list[int], rng, gap: float = 0.3) -> None:
+    """Send seed words on the seed bus, with random idle cycles between them."""
+    for word in words:
+        while rng.random() < gap:
+            dut.s_seed_tvalid.value = 0
+            await RisingEdge(dut.clk)
+        dut.s_seed_tvalid.value = 1
+        dut.s_seed_tdata.value = word
+        await RisingEdge(dut.clk)
+    dut.s_seed_tvalid.value = 0
+
+
+async def collect(mon: StreamMonitor, n: int) -> list[int]:
+    while len(mon.beats) < n:
+        await RisingEdge(mon.clk)
+    return [beat.data for beat in mon.beats[:n]]
+
+
+def check(sb: Scoreboard, b: Bench, expected_raw: np.ndarray, words: list[int]) -> None:
+    actual = unpack(words, sb.fields, b.cfg.lanes)
+    sb.compare({"z": expected_raw[: len(words)]}, actual)
+
+
+async def idle_inputs(dut: SimHandleBase) -> None:
+    dut.s_seed_tvalid.value = 0
+    dut.s_seed_tdata.value = 0
+    dut.m_axis_tready.value = 1
+
+
+@cocotb.test()
+async def test_reset_latency_throughput(dut: SimHandleBase) -> None:
+    """From reset: the config's seed, first sample after LATENCY clocks, then one per clock."""
+    b = bench()
+    latency = b.manifest["modules"]["grng"]["latency"]
+    await idle_inputs(dut)
+    mon = StreamMonitor(dut.clk, dut, "m_axis")
+    await start(dut, hold_reset=True)
+    dut.rst.value = 0
+    clocks = 0
+    while True:
+        await RisingEdge(dut.clk)
+        clocks += 1
+        await ReadOnly()
+        if dut.m_axis_tvalid.value == 1:
+            break
+        assert clocks < 10 * latency, "no sample after reset"
+    assert clocks == latency, f"first sample after {clocks} clocks, manifest says {latency}"
+
+    n = 2_000
+    words = await collect(mon, n)
+    mon.stop()
+    # throughput: n samples in n consecutive clocks (n + latency from reset)
+    span = mon.beats[n - 1].cycle - mon.beats[0].cycle + 1
+    assert span == n, f"{n} samples took {span} clocks without stalls"
+    sb = scoreboard(b)
+    check(sb, b, GrngModel(b.cfg).normals_raw(n), words)
+    dut._log.info(sb.summary())
+    sb.assert_clean()
+
+
+@cocotb.test()
+@cocotb.parametrize(stall=[0.0, 0.3, 0.8])
+async def test_seeded_stalls(dut: SimHandleBase, stall: float) -> None:
+    """Seed loaded at run time (SEED), random output stalls: every sample of every lane exact."""
+    b = bench()
+    n = samples_per_lane(b) if stall == 0.3 else samples_per_lane(b) // 5
+    model = GrngModel(b.cfg)
+    await idle_inputs(dut)
+    seed_mon = StreamMonitor(dut.clk, dut, "s_seed")
+    await start(dut)
+    await load_seed(dut, model.seed_words(b.seed), b.rng(f"seed-gaps-{stall}"))
+    await ClockCycles(dut.clk, 2)
+    seen = [beat.data for beat in seed_mon.beats]
+    seed_mon.stop()
+    assert len(seen) == COMPONENTS * b.cfg.lanes
+
+    ready = ReadyDriver(dut.clk, dut.m_axis_tready, stall, b.rng(f"stall-{stall}"))
+    mon = StreamMonitor(dut.clk, dut, "m_axis")
+    words = await collect(mon, n)
+    ready.stop()
+    mon.stop()
+    sb = scoreboard(b)
+    check(sb, b, model.normals_raw_from_words(seen, n), words)
+    dut._log.info("stall %.1f: %s (%d lanes x %d samples)", stall, sb.summary(),
+                  b.cfg.lanes, n)
+    sb.assert_clean()
+
+
+@cocotb.test()
+async def test_reseed_mid_stream(dut: SimHandleBase) -> None:
+    """A seed load while samples flow: the old sequence up to it, nothing during it, then the
+    new sequence from its first sample."""
+    b = bench()
+    model = GrngModel(b.cfg)
+    await idle_inputs(dut)
+    mon = StreamMonitor(dut.clk, dut, "m_axis")
+    seed_mon = StreamMonitor(dut.clk, dut, "s_seed")  # same clock count as `mon`
+    await start(dut)
+    ready = ReadyDriver(dut.clk, dut.m_axis_tready, 0.5, b.rng("reseed-stall"))
+    await ClockCycles(dut.clk, 300)
+    await load_seed(dut, model.seed_words(b.seed + 1), b.rng("reseed"))
+    await collect(mon, len(mon.beats) + 1_000)
+    ready.stop()
+    mon.stop()
+    seed_mon.stop()
+    first, last = seed_mon.beats[0].cycle, seed_mon.beats[-1].cycle
+    old = [beat.data for beat in mon.beats if beat.cycle <= first]
+    during = [beat for beat in mon.beats if first < beat.cycle <= last]
+    new = [beat.data for beat in mon.beats if beat.cycle > last]
+    assert not during, f"{len(during)} samples left the block during the seed load"
+    sb = scoreboard(b)
+    check(sb, b, model.normals_raw(len(old)), old)
+    sb.compare({"z": model.normals_raw(len(new), seed=b.seed + 1)},
+               unpack(new, sb.fields, b.cfg.lanes), first_beat=len(old))
+    dut._log.info("%s (%d before the load, %d after)", sb.summary(), len(old), len(new))
+    sb.assert_clean()
+
+
+class TruncatingModel(GrngModel):
+    """Deliberately wrong: drops the guard bits by truncation instead of rounding half up."""
+
+    def _horner(self, addr: np.ndarray, x: np.ndarray) -> np.ndarray:
+        xw = self.seg.offset_bits
+        s1 = self._s1(addr, x)
+        s2 = shift_round(s1 * x, xw, "half_up", width=62) + self.lut[addr, 0]
+        return np.maximum(shift_round(s2, self.guard_bits, "truncate", width=62), 0)
+
+
+@cocotb.test()
+async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
+    """The scoreboard must fail a model that is wrong by one LSB now and then."""
+    b = bench()
+    await idle_inputs(dut)
+    mon = StreamMonitor(dut.clk, dut, "m_axis")
+    await start(dut)
+    words = await collect(mon, 2_000)
+    mon.stop()
+    for wrong in (TruncatingModel(b.cfg).normals_raw(2_000),
+                  np.roll(GrngModel(b.cfg).normals_raw(2_000), 1, axis=0)):  # one beat late
+        sb = scoreboard(b, expect_mismatch=True)
+        check(sb, b, wrong, words)
+        assert sb.mismatched > 0, "a corrupted model passed the scoreboard"
+        assert sb.first_mismatch is not None and "field z [" in sb.first_mismatch
+        dut._log.info("corrupted model caught: %s", sb.first_mismatch)

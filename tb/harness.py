@@ -1,0 +1,59 @@
+"""What every cocotb testbench needs: its config, model inputs, clock, reset and seed."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import random
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.handle import SimHandleBase
+from cocotb.triggers import ClockCycles, RisingEdge
+
+from gpf.config import Config, load_config
+
+CLOCK_NS = 10
+
+
+@dataclass(frozen=True)
+class Bench:
+    """The run's settings, passed by the runner in GPF_* environment variables."""
+
+    cfg: Config
+    manifest: dict[str, Any]
+    seed: int
+    long: bool
+
+    def rng(self, salt: str) -> random.Random:
+        """An independent, replayable random stream for one purpose (stalls, stimulus, ...)."""
+        return random.Random(f"{self.seed}:{salt}")
+
+
+def bench() -> Bench:
+    overrides = json.loads(os.environ.get("GPF_OVERRIDES", "{}"))
+    cfg = load_config(os.environ["GPF_CONFIG"], overrides)
+    manifest = json.loads(Path(os.environ["GPF_MANIFEST"]).read_text())
+    long = os.environ.get("TEST_LEVEL", "default") == "long"
+    # the run's seed as the user gave it (cocotb.RANDOM_SEED is re-mixed per test)
+    seed = int(os.environ["COCOTB_RANDOM_SEED"])
+    logging.getLogger("tb").info("SEED=%d (replay: make sim MODULE=%s CONFIG=%s SEED=%d)",
+                                 seed, os.environ.get("GPF_MODULE", "?"), cfg.name, seed)
+    return Bench(cfg, manifest, seed, long)
+
+
+async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = False) -> None:
+    """Start the clock and apply the synchronous reset for a few cycles.
+
+    With hold_reset the reset is still high on return (the caller releases it and counts).
+    """
+    cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns").start())
+    dut.rst.value = 1
+    await ClockCycles(dut.clk, reset_cycles)
+    if not hold_reset:
+        dut.rst.value = 0
+        await RisingEdge(dut.clk)

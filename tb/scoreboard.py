@@ -1,0 +1,87 @@
+"""Bit-exact scoreboard: compares raw fields beat by beat, lane by lane, in order.
+
+The first mismatch is reported with block, beat, lane, field, and expected/actual both as real
+numbers and as raw hex; totals of matched and mismatched values are kept for the summary.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gpf.model.fixed import Format
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    fmt: Format
+
+
+def unpack(words: list[int], fields: list[Field], lanes: int) -> dict[str, np.ndarray]:
+    """Split stream words into raw field values: (beats, lanes) int64 per field.
+
+    Fields are packed LSB first within a lane; lanes are concatenated, lane 0 lowest.
+    """
+    lane_w = sum(f.fmt.width for f in fields)
+    out = {f.name: np.zeros((len(words), lanes), dtype=np.int64) for f in fields}
+    for beat, word in enumerate(words):
+        for lane in range(lanes):
+            chunk = word >> (lane * lane_w)
+            for f in fields:
+                raw = chunk & ((1 << f.fmt.width) - 1)
+                if f.fmt.signed and raw >> (f.fmt.width - 1):
+                    raw -= 1 << f.fmt.width
+                out[f.name][beat, lane] = raw
+                chunk >>= f.fmt.width
+    return out
+
+
+@dataclass
+class Scoreboard:
+    block: str
+    fields: list[Field]
+    matched: int = 0
+    mismatched: int = 0
+    first_mismatch: str | None = None
+    expect_mismatch: bool = False  # a deliberately corrupted model: mismatches are the point
+    log: logging.Logger = field(default_factory=lambda: logging.getLogger("tb.scoreboard"))
+
+    def compare(self, expected: dict[str, np.ndarray], actual: dict[str, np.ndarray],
+                first_beat: int = 0) -> int:
+        """Compare (beats, lanes) arrays field by field; return the new mismatch count."""
+        new = 0
+        for f in self.fields:
+            exp, act = np.asarray(expected[f.name]), np.asarray(actual[f.name])
+            if exp.shape != act.shape:
+                raise AssertionError(f"{self.block}.{f.name}: expected {exp.shape} values, "
+                                     f"got {act.shape}")
+            bad = exp != act
+            n_bad = int(bad.sum())
+            self.matched += exp.size - n_bad
+            new += n_bad
+            if n_bad and self.first_mismatch is None:
+                beat, lane = (int(i) for i in np.argwhere(bad)[0])
+                self.first_mismatch = self.describe(f, first_beat + beat, lane,
+                                                    int(exp[beat, lane]), int(act[beat, lane]))
+                report = self.log.info if self.expect_mismatch else self.log.error
+                report("first mismatch: %s", self.first_mismatch)
+        self.mismatched += new
+        return new
+
+    def describe(self, f: Field, beat: int, lane: int, exp: int, act: int) -> str:
+        def show(raw: int) -> str:
+            return f"{float(f.fmt.to_real(raw)):.9g} (0x{raw & ((1 << f.fmt.width) - 1):0{(f.fmt.width + 3) // 4}x})"
+
+        return (f"{self.block}: beat {beat}, lane {lane}, field {f.name} [{f.fmt}]: "
+                f"expected {show(exp)}, actual {show(act)}")
+
+    def summary(self) -> str:
+        return f"{self.block}: {self.matched} matched, {self.mismatched} mismatched"
+
+    def assert_clean(self) -> None:
+        """Pass only with zero mismatches AND something compared."""
+        assert self.mismatched == 0, f"{self.summary()}; first: {self.first_mismatch}"
+        assert self.matched > 0, f"{self.block}: nothing was compared"
