@@ -10,7 +10,6 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from gpf.config import Config
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
@@ -40,7 +39,7 @@ def test_module(module: str) -> str:
 
 def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = False,
             seed: int | None = None, testcase: str | None = None,
-            overrides: dict[str, Any] | None = None, extra_env: dict[str, str] | None = None,
+            extra_env: dict[str, str] | None = None,
             template_dir: Path | None = None, build_root: Path = Path("build"),
             log_file: Path | None = None) -> SimResult:
     """Generate the RTL, build it for `sim` and run the module's cocotb tests.
@@ -70,7 +69,7 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     waves_file = build_dir / f"{module}.fst"
     env = {
         "GPF_CONFIG": str(Path(cfg.source).resolve()),
-        "GPF_OVERRIDES": json.dumps(overrides or {}),
+        "GPF_OVERRIDES": json.dumps(cfg.overrides),
         "GPF_MANIFEST": str(generated.out_dir / "manifest.json"),
         "GPF_MODULE": module,
         "TEST_LEVEL": os.environ.get("TEST_LEVEL", "default"),
@@ -88,5 +87,9 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     finally:
         if hidden is not None:
             os.environ["PYTEST_CURRENT_TEST"] = hidden
+    if waves:
+        from gpf.rtl.waves import write_view
+
+        write_view(cfg, module, sim, waves_file)
     tests, failed = get_results(Path(xml))
     return SimResult(module, sim, seed, tests, failed, Path(xml), waves_file if waves else None)

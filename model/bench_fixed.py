@@ -9,6 +9,7 @@ import argparse
 import time
 
 import numpy as np
+
 from gpf.model.fixed import Format, mul_round
 
 # (a, b, out): s3.20 products need 48 bits (int64); s30.30 products need 122 bits (object).

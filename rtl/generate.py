@@ -153,7 +153,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
         }
     texts["manifest.json"] = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
     if cfg.source:
-        texts["config.toml"] = Path(cfg.source).read_text()
+        texts["config.toml"] = Path(cfg.source).read_text() + "".join(
+            f"# overridden: {key} = {value!r}\n" for key, value in cfg.overrides.items())
     out_dir.mkdir(parents=True, exist_ok=True)
     for fname, text in texts.items():
         path = out_dir / fname

@@ -40,6 +40,7 @@ import io
 import re
 import struct
 import warnings
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
@@ -108,6 +109,8 @@ def render_gtkw(dumpfile: Path, groups: list[Group]) -> str:
     """Return the text of a GTKWave save file showing ``groups`` of ``dumpfile``.
 
     The text depends only on the arguments and on the dump's header (no dates, no window state).
+    ``[dumpfile]`` is written as given: a dump named on GTKWave's command line takes precedence,
+    and GTKWave resolves a relative one from its working directory.
     """
     dumpfile = Path(dumpfile)
     _check_text("dumpfile", str(dumpfile))
@@ -221,10 +224,10 @@ def _read_declared(dumpfile: Path) -> dict[str, Declared] | None:
                 names = _vcd_vars(f)
             else:
                 raise ValueError("neither FST nor VCD")
-            return None if names is None else _declared_from_names(names)
+            return _declared_from_names(names)
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, IndexError, struct.error, EOFError) as exc:
+    except (OSError, ValueError, IndexError, EOFError, struct.error, zlib.error) as exc:
         warnings.warn(
             f"{dumpfile}: declared ranges not read ({exc}); bit slices need the range in the path",
             stacklevel=3,
@@ -284,9 +287,11 @@ _FST_ST_VCD_SCOPE = 254
 _FST_ST_VCD_UPSCOPE = 255
 
 
-def _fst_vars(f: BinaryIO) -> list[tuple[str, int]] | None:
-    """(full name, length) of every variable in an FST file's hierarchy block, None if the file
-    has none yet (still being written). Blocks: kind byte, u64 length counting itself, body."""
+def _fst_vars(f: BinaryIO) -> list[tuple[str, int]]:
+    """(full name, length) of every variable in an FST file's hierarchy block.
+
+    Blocks: kind byte, u64 length counting itself, body. The hierarchy is written last, when the
+    simulator closes the file."""
     while head := f.read(9):
         if len(head) < 9:
             break
@@ -308,7 +313,7 @@ def _fst_vars(f: BinaryIO) -> list[tuple[str, int]] | None:
             uclen2, skip = _varint(packed, 0)
             hier = _lz4_block(_lz4_block(packed[skip:], uclen2), uclen)
         return _fst_hier(hier)
-    return None
+    raise ValueError("no hierarchy block (is the simulation still writing it?)")
 
 
 def _fst_hier(data: bytes) -> list[tuple[str, int]]:

@@ -72,8 +72,11 @@ class Scoreboard:
         return new
 
     def describe(self, f: Field, beat: int, lane: int, exp: int, act: int) -> str:
+        digits = (f.fmt.width + 3) // 4
+
         def show(raw: int) -> str:
-            return f"{float(f.fmt.to_real(raw)):.9g} (0x{raw & ((1 << f.fmt.width) - 1):0{(f.fmt.width + 3) // 4}x})"
+            bits = raw & ((1 << f.fmt.width) - 1)
+            return f"{float(f.fmt.to_real(raw)):.9g} (0x{bits:0{digits}x})"
 
         return (f"{self.block}: beat {beat}, lane {lane}, field {f.name} [{f.fmt}]: "
                 f"expected {show(exp)}, actual {show(act)}")

@@ -8,6 +8,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from gpf.model.fixed import (
     Format,
     add_sat,
@@ -16,8 +19,6 @@ from gpf.model.fixed import (
     saturate,
     shift_round,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 I64_MIN, I64_MAX = -(1 << 63), (1 << 63) - 1
 ROUNDINGS = ("half_up", "truncate")

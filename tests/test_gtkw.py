@@ -8,6 +8,7 @@ import struct
 from pathlib import Path
 
 import pytest
+
 from gpf.rtl import gtkw
 from gpf.rtl.gtkw import Group, Trace, render_gtkw, write_gtkw
 

