@@ -14,6 +14,7 @@ from pathlib import Path
 from gpf.config import Config
 from gpf.rtl.generate import grng_context
 from gpf.rtl.gtkw import Group, Trace, write_gtkw
+from gpf.tb.harness import CLOCK_NS
 from gpf.toolchain import ToolchainError
 
 
@@ -66,7 +67,8 @@ def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build
 
 def write_view(cfg: Config, module: str, sim: str, fst: Path) -> Path:
     gtkw = fst.with_suffix(".gtkw")
-    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim))
+    # open on the first 24 clocks: reset, pipeline fill, the first samples readable
+    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim), window_ps=24 * CLOCK_NS * 1000)
     return gtkw
 
 
