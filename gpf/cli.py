@@ -83,6 +83,78 @@ def cmd_model_grng(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario_arg(text: str | None):
+    """A scenario name, or a CSV file (read once: every run filters the same data)."""
+    if text is None or not text.endswith(".csv"):
+        return text
+    from gpf.model.scenarios import read_csv
+
+    try:
+        return read_csv(text)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--scenario {text}: {exc}") from None
+
+
+def _positive(name: str, value: int | None) -> None:
+    if value is not None and value < 1:
+        raise UsageError(f"{name} {value}: must be at least 1")
+
+
+def cmd_model_run(args: argparse.Namespace) -> int:
+    import json
+
+    from gpf.model.study import monte_carlo, plot
+
+    for name in ("steps", "particles", "runs"):
+        _positive(f"--{name}", getattr(args, name))
+    cfg = _config(args)
+    if args.particles is not None and args.particles % cfg.lanes:
+        raise UsageError(f"--particles {args.particles}: must be a multiple of "
+                         f"filter.lanes = {cfg.lanes}")
+    try:
+        mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
+                         seed=args.seed, word=args.word, scenario=_scenario_arg(args.scenario))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    summary = mc.summary()
+    if args.plot:
+        summary["plots"] = plot(mc, args.plot)
+    out = Path(args.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(summary, indent=1) + "\n")
+    ratio, noise = mc.ratio_and_noise()
+    print(f"{cfg.name} {mc.scenario}: {mc.runs} runs x {mc.steps} steps, N = {mc.particles}: "
+          f"RMSE {summary['rmse_unit']} float {mc.rmse('float'):.5g}, fixed "
+          f"{mc.rmse('fixed'):.5g}, ratio {ratio:.4f} +- {noise:.4f}; flags {mc.flag_counts}"
+          f" -> {out}")
+    return 0
+
+
+def cmd_model_wordlength(args: argparse.Namespace) -> int:
+    from gpf.model.study import monte_carlo
+
+    lo, _, rest = args.words.partition(":")
+    hi, _, step = rest.partition(":")
+    try:
+        words = list(range(int(lo), int(hi) + 1, int(step or 2)))
+    except ValueError:
+        raise UsageError(f"--words {args.words!r}: expected FIRST:LAST[:STEP]") from None
+    if not words or words[0] < 12 or words[-1] > 32:
+        raise UsageError(f"--words {args.words!r}: widths must lie in [12, 32]")
+    print("| config | word | RMSE float | RMSE fixed | fixed/float | +- (1 s.e.) | flags |")
+    print("|---|---|---|---|---|---|---|")
+    for name in args.config or ["bot", "uav"]:
+        cfg = load_config(config_path(name), parse_overrides(args.set))
+        for word in words:
+            mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
+                             seed=args.seed, word=word)
+            ratio, noise = mc.ratio_and_noise()
+            flags = ", ".join(f"{k} {v}" for k, v in mc.flag_counts.items() if v) or "-"
+            print(f"| {cfg.name} | {word} | {mc.rmse('float'):.5g} | {mc.rmse('fixed'):.5g} | "
+                  f"{ratio:.4f} | {noise:.4f} | {flags} |", flush=True)
+    return 0
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from gpf.sim import run_sim
 
@@ -154,6 +226,30 @@ def build_parser() -> Parser:
                    help="seed load as in the RTL (default: the config's reset seed)")
     g.add_argument("--out", required=True, help="output .npy: shape (samples, lanes), reals")
     g.set_defaults(func=cmd_model_grng)
+
+    r = msub.add_parser("run", help="Monte Carlo runs of the fixed-point and float64 GPFs")
+    with_config(r)
+    r.add_argument("--steps", type=int, help="steps per run (default: the config's)")
+    r.add_argument("--particles", type=int, help="N (default: the config's maximum)")
+    r.add_argument("--runs", type=int, default=1)
+    r.add_argument("--seed", type=int, default=1, help="run r uses seed + r")
+    r.add_argument("--scenario", help="bot_fixed_observer (bot default), "
+                   "bot_manoeuvring_observer, uav_flight (uav default), or a CSV file")
+    r.add_argument("--word", type=int, help="resize every datapath word (word-length study)")
+    r.add_argument("--plot", metavar="DIR", help="write PNGs of the first run there")
+    r.add_argument("--json", required=True, metavar="OUT")
+    r.set_defaults(func=cmd_model_run)
+
+    wl = msub.add_parser("wordlength", help="RMSE(fixed)/RMSE(float) per datapath word length")
+    wl.add_argument("--config", action="append", default=[],
+                    help="config (repeatable; default: bot and uav)")
+    wl.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    wl.add_argument("--words", default="14:28:2", help="FIRST:LAST[:STEP] (default 14:28:2)")
+    wl.add_argument("--runs", type=int, default=20)
+    wl.add_argument("--steps", type=int)
+    wl.add_argument("--particles", type=int, default=512)
+    wl.add_argument("--seed", type=int, default=1)
+    wl.set_defaults(func=cmd_model_wordlength)
 
     p = sub.add_parser("sim", help="run a block's cocotb testbench")
     with_config(p)

@@ -98,6 +98,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "sigma_a": _positive_float(),
         "sigma_v": _positive_float(),
         "covariance": _choice("full", "block"),
+        # initial covariance diagonal for [q0, q1, q2, q3, vE, vN, vU]
+        "sigma0_diag": _vector(7, positive=True),
     },
 }
 

@@ -69,26 +69,16 @@ def lfsr_step(z: int, component: int) -> int:
 
 
 class _LinearMap:
-    """A GF(2)-linear map on 64-bit words, applied to numpy arrays via 8 byte tables."""
+    """A GF(2)-linear map on 64-bit words, applied to numpy arrays through 8 byte tables."""
 
-    def __init__(self, columns: list[int]):
-        self.columns = columns
+    def __init__(self, columns: np.ndarray):
+        self.columns = columns.astype(np.uint64)  # image of each unit vector 1 << bit
         tables = np.zeros((8, 256), dtype=np.uint64)
+        values = np.arange(256)
         for byte in range(8):
-            for value in range(256):
-                acc = 0
-                for bit in range(8):
-                    if value >> bit & 1:
-                        acc ^= columns[8 * byte + bit]
-                tables[byte, value] = acc
+            for bit in range(8):
+                tables[byte, (values >> bit) & 1 == 1] ^= self.columns[8 * byte + bit]
         self.tables = tables
-
-    def apply_int(self, z: int) -> int:
-        acc = 0
-        for bit in range(64):
-            if z >> bit & 1:
-                acc ^= self.columns[bit]
-        return acc
 
     def apply(self, z: np.ndarray) -> np.ndarray:
         out = np.zeros_like(z)
@@ -96,38 +86,42 @@ class _LinearMap:
             out ^= self.tables[byte][(z >> np.uint64(8 * byte)) & np.uint64(0xFF)]
         return out
 
-    def compose(self, other: _LinearMap) -> _LinearMap:
-        """self after other."""
-        return _LinearMap([self.apply_int(c) for c in other.columns])
+    def squared(self) -> _LinearMap:
+        return _LinearMap(self.apply(self.columns))
 
 
-_BLOCK = 4096
-_JUMPS: dict[int, _LinearMap] = {}
+_BLOCK_LEVELS = 16  # states are produced in blocks of up to 2^16 per numpy operation
+_POWERS: dict[int, list[_LinearMap]] = {}
 
 
-def _jump(component: int) -> _LinearMap:
-    """The map z -> step^_BLOCK(z) for one component (built by squaring)."""
-    if component not in _JUMPS:
-        m = _LinearMap([lfsr_step(1 << bit, component) for bit in range(64)])
-        for _ in range(_BLOCK.bit_length() - 1):
-            m = m.compose(m)
-        _JUMPS[component] = m
-    return _JUMPS[component]
+def _powers(component: int) -> list[_LinearMap]:
+    """The maps step^(2^j), j = 0.._BLOCK_LEVELS, for one component (built by squaring)."""
+    if component not in _POWERS:
+        first = np.array([lfsr_step(1 << bit, component) for bit in range(64)], dtype=np.uint64)
+        maps = [_LinearMap(first)]
+        for _ in range(_BLOCK_LEVELS):
+            maps.append(maps[-1].squared())
+        _POWERS[component] = maps
+    return _POWERS[component]
 
 
 def component_states(z0: int, component: int, n: int) -> np.ndarray:
-    """States z_1 .. z_n after 1 .. n steps from z0, vectorised in blocks of _BLOCK."""
-    first, z = [], z0
-    for _ in range(min(n, _BLOCK)):
-        z = lfsr_step(z, component)
-        first.append(z)
+    """States z_1 .. z_n after 1 .. n steps from z0.
+
+    The first block grows by doubling (z_{m+1..2m} = step^m(z_{1..m})), later blocks jump by the
+    block length, so the work is a few dozen numpy operations per 2^16 states.
+    """
+    maps = _powers(component)
+    block = np.array([lfsr_step(z0, component)], dtype=np.uint64)
+    level = 0
+    while len(block) < n and level < _BLOCK_LEVELS:
+        block = np.concatenate([block, maps[level].apply(block)])
+        level += 1
     out = np.empty(n, dtype=np.uint64)
-    block = np.array(first, dtype=np.uint64)
-    out[: len(block)] = block
-    jump = _jump(component)
-    for start in range(_BLOCK, n, _BLOCK):
-        block = jump.apply(block)
-        end = min(start + _BLOCK, n)
+    out[: min(n, len(block))] = block[:n]
+    for start in range(len(block), n, len(block)):
+        block = maps[level].apply(block)
+        end = min(start + len(block), n)
         out[start:end] = block[: end - start]
     return out
 
@@ -154,9 +148,10 @@ class Segmentation:
 class GrngModel:
     """Bit-exact model of the generated `grng` block for one config."""
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, lanes: int | None = None):
+        """`lanes` overrides cfg.lanes: the filter's GRNG has draws-per-particle x LANES lanes."""
         self.cfg = cfg
-        self.lanes = cfg.lanes
+        self.lanes = cfg.lanes if lanes is None else lanes
         self.out: Format = cfg.noise
         g = cfg.grng
         self.seg = Segmentation(g.octaves, g.segment_bits, g.offset_bits)

@@ -1,0 +1,192 @@
+"""float64 Gaussian particle filter: the accuracy yardstick of the fixed-point model.
+
+The block functions (same boundaries as the hardware blocks) live in `float_blocks` and are
+re-exported here. A step consumes one array of N(0, 1) draws of shape (N, D), per particle in
+this order: bot D = 6: [e_cond(4), e_proc(2)]; uav D = 13: [e_cond(7), e_gyro(3), e_acc(3)].
+Feeding the hardware's own draws gives the quantisation error of each step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gpf.model.float_blocks import (
+    FLAGS,
+    GRAVITY,
+    NOT_PD,
+    ZERO_WEIGHTS,
+    Array,
+    cholesky,
+    moments,
+    omega_matrix,
+    propagate_bot,
+    propagate_uav,
+    rotation_matrix,
+    sample_cond,
+    weight_bot,
+    weight_uav,
+    wrap_angle,
+)
+from gpf.model.scenarios import Scenario
+
+__all__ = [
+    "FLAGS", "GRAVITY", "NOT_PD", "ZERO_WEIGHTS", "FloatGPF", "RunResult", "StepResult",
+    "attitude_error_deg", "cholesky", "draw_count", "moments", "omega_matrix",
+    "position_error", "position_rmse", "propagate_bot", "propagate_uav", "rotation_matrix",
+    "sample_cond", "state_size", "weight_bot", "weight_uav", "wrap_angle",
+]
+
+
+def state_size(app: str) -> int:
+    return {"bot": 4, "uav": 7}[app]
+
+
+def draw_count(app: str) -> int:
+    """D, the N(0, 1) draws per particle and step."""
+    return {"bot": 6, "uav": 13}[app]
+
+
+@dataclass
+class StepResult:
+    """One filter step. `Sigma` is the moments output; `L` its (regularised) Cholesky factor."""
+
+    mu: Array            # (n,)
+    Sigma: Array         # (n, n)
+    L: Array             # (n, n) lower triangular
+    flags: set[str]      # subset of FLAGS
+    ref: Array           # (n,) propagated previous mean, the moments' reference
+    x_cond: Array        # (N, n) conditioning particles
+    x: Array             # (N, n) propagated particles
+    w: Array             # (N,) weights
+    W: float             # sum of the weights
+
+    @property
+    def ess(self) -> float:
+        """Effective sample size (sum w)^2 / sum w^2; 0 when every weight is zero."""
+        s2 = float(self.w @ self.w)
+        return self.W * self.W / s2 if s2 > 0 else 0.0
+
+
+@dataclass
+class RunResult:
+    """Estimates of a whole run, index k = 0..steps (row 0: the initial mu0, Sigma0)."""
+
+    mu: Array                      # (steps+1, n)
+    Sigma: Array                   # (steps+1, n, n)
+    flags: dict[str, np.ndarray]   # name -> bool (steps+1,)
+    ess: Array                     # (steps+1,), NaN at k = 0
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+class FloatGPF:
+    """The float64 GPF for cfg.app with `particles` particles (default cfg.particles)."""
+
+    def __init__(self, cfg: Any, particles: int | None = None) -> None:
+        self.cfg = cfg
+        self.app: str = cfg.app
+        self.particles = int(particles if particles is not None else cfg.particles)
+        self.n = state_size(self.app)
+        self.draws_per_particle = draw_count(self.app)
+        self.covariance: str = cfg.app_params.get("covariance", "full")
+
+    def initial(self, scenario: Scenario | None = None) -> tuple[Array, Array]:
+        """(mu0, Sigma0): the scenario's initial estimate, else the config's (bot: x0; uav:
+        the truth at k = 0), and Sigma0 = diag(sigma0_diag) from the config."""
+        p = self.cfg.app_params
+        if scenario is not None and scenario.mu0 is not None:
+            mu0 = np.array(scenario.mu0, dtype=float)
+        elif self.app == "bot":
+            mu0 = np.array(p["x0"], dtype=float)
+        elif scenario is not None and np.all(np.isfinite(scenario.truth[0])):
+            mu0 = np.array(scenario.truth[0], dtype=float)
+        else:
+            raise ValueError("uav: no initial estimate (scenario.mu0 and truth at k = 0 missing)")
+        return mu0, np.diag(np.array(p["sigma0_diag"], dtype=float))
+
+    def step(self, mu: Array, L: Array, inputs_k: Mapping[str, Any],  # noqa: N803
+             draws: Array) -> StepResult:
+        """One filter step from (mu_{k-1}, L_{k-1}) with the step's inputs and draws (N, D).
+
+        inputs_k: bot {"z": bearing, "observer": (ox, oy)}; uav {"omega": (3,), "accel": (3,),
+        "v_gps": (3,)} (Scenario.step_inputs(k) builds it).
+        """
+        n, cfg = self.n, self.cfg
+        draws = np.asarray(draws, dtype=float)
+        if draws.ndim != 2 or draws.shape[1] != self.draws_per_particle:
+            raise ValueError(f"draws: shape {draws.shape}, expected (N, {self.draws_per_particle})")
+        x_cond = sample_cond(mu, L, draws[:, :n])
+        if self.app == "bot":
+            x = propagate_bot(x_cond, draws[:, 4:6], cfg)
+            ref = propagate_bot(mu[None, :], np.zeros((1, 2)), cfg)[0]
+            w = weight_bot(x, float(inputs_k["z"]), np.asarray(inputs_k["observer"], float), cfg)
+        else:
+            omega = np.asarray(inputs_k["omega"], dtype=float)
+            accel = np.asarray(inputs_k["accel"], dtype=float)
+            x = propagate_uav(x_cond, draws[:, 7:10], draws[:, 10:13], omega, accel, cfg)
+            zero = np.zeros((1, 3))
+            ref = propagate_uav(mu[None, :], zero, zero, omega, accel, cfg)[0]
+            w = weight_uav(x, np.asarray(inputs_k["v_gps"], dtype=float), cfg)
+        mu_k, sigma_k, flags = moments(x, w, ref, self.app, self.covariance,
+                                       sigma_prev=L @ L.T)
+        chol_k, chol_flags = cholesky(sigma_k)
+        return StepResult(mu_k, sigma_k, chol_k, flags | chol_flags, ref, x_cond, x, w,
+                          float(np.sum(w)))
+
+    def run(self, scenario: Scenario, draws: Array | None = None,
+            rng: np.random.Generator | None = None) -> RunResult:
+        """Filter the whole scenario. draws: (steps, N, D), row k-1 feeds step k; else they come
+        from rng (default: numpy's PCG64 seeded with cfg.grng.seed), one (N, D) block a step."""
+        steps, n = scenario.steps, self.n
+        shape = (self.particles, self.draws_per_particle)
+        if draws is not None:
+            draws = np.asarray(draws, dtype=float)
+            if draws.shape != (steps, *shape):
+                raise ValueError(f"draws: shape {draws.shape}, expected {(steps, *shape)}")
+        elif rng is None:
+            rng = np.random.default_rng(self.cfg.grng.seed)
+        mu, sigma = self.initial(scenario)
+        chol, _ = cholesky(sigma)
+        out_mu = np.empty((steps + 1, n))
+        out_sigma = np.empty((steps + 1, n, n))
+        flags = {name: np.zeros(steps + 1, dtype=bool) for name in FLAGS}
+        ess = np.full(steps + 1, np.nan)
+        out_mu[0], out_sigma[0] = mu, sigma
+        for k in range(1, steps + 1):
+            block = draws[k - 1] if draws is not None else rng.standard_normal(shape)
+            res = self.step(mu, chol, scenario.step_inputs(k), block)
+            mu, chol = res.mu, res.L
+            out_mu[k], out_sigma[k], ess[k] = res.mu, res.Sigma, res.ess
+            for name in res.flags:
+                flags[name][k] = True
+        return RunResult(out_mu, out_sigma, flags, ess,
+                         meta={"particles": self.particles, "config": self.cfg.name})
+
+
+def position_error(est: Array, truth: Array) -> Array:
+    """bot: Euclidean (px, py) error in metres of every row of (..., 4) arrays."""
+    est, truth = np.asarray(est, dtype=float), np.asarray(truth, dtype=float)
+    return np.hypot(est[..., 0] - truth[..., 0], est[..., 2] - truth[..., 2])
+
+
+def position_rmse(est: Array, truth: Array, axis: int | tuple[int, ...] | None = None) -> Array:
+    """bot: root mean square of the (px, py) error in metres over `axis` (None: all rows)."""
+    err = position_error(est, truth)
+    return np.sqrt(np.mean(err * err, axis=axis))
+
+
+def attitude_error_deg(q_est: Array, q_true: Array) -> Array:
+    """uav: rotation angle in degrees between two attitudes (..., 4) or full states (..., 7);
+    insensitive to the sign and norm of either quaternion."""
+    a = np.asarray(q_est, dtype=float)[..., :4]
+    b = np.asarray(q_true, dtype=float)[..., :4]
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    # error quaternion conj(a) (x) b; atan2 of its vector and scalar parts stays accurate for
+    # small angles, where acos(dot) would lose half the digits
+    scalar = np.abs(np.sum(a * b, axis=-1))
+    vec = a[..., :1] * b[..., 1:] - b[..., :1] * a[..., 1:] - np.cross(a[..., 1:], b[..., 1:])
+    return np.degrees(2.0 * np.arctan2(np.linalg.norm(vec, axis=-1), scalar))

@@ -1,0 +1,149 @@
+"""Every fixed-point format and constant of the GPF datapath, derived once from the config.
+
+The fixed-point model computes with these, and the generator writes the same values into the
+RTL. Line-rate operands are one datapath word (the state formats' width); constants are 18-bit
+signed (one DSP48 operand); the serial finalisation (moments' divisions, Cholesky) is exact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from gpf.config import Config
+from gpf.model.fixed import Format
+from gpf.model.primitives import Cordic, Exp2Neg
+
+CONST_WIDTH = 18     # constants are one 18-bit DSP operand
+CHOL_SHIFT = 3       # L entries carry 3 more fraction bits than the state they scale
+INV_GUARD = 8        # extra fraction bits of 1/L_jj in the Cholesky
+CHOL_FLOOR_LSB = 256  # regularisation: a pivot below (256 LSB of L)^2 is raised to it
+T_INT_BITS = 8       # 2^-t underflows to 0 long before t = 256
+U_INT_BITS = 4       # u = whitened innovation, t = u^2 (or a sum of squares) < 256
+UAV_GYRO_INT_BITS = 2    # body rates within +-4 rad/s
+UAV_ACCEL_INT_BITS = 6   # specific force within +-64 m/s^2 (6.5 g)
+GRAVITY = (0.0, 0.0, -9.8)
+
+
+@dataclass(frozen=True)
+class Const:
+    """A real constant quantised to an 18-bit signed raw value with as many fraction bits as fit."""
+
+    value: float
+    raw: int
+    frac: int
+
+    @classmethod
+    def of(cls, value: float, width: int = CONST_WIDTH) -> Const:
+        int_bits = max(0, math.floor(math.log2(abs(value))) + 1) if value else 0
+        frac = width - 1 - int_bits
+        raw = math.floor(value * 2**frac + 0.5)
+        if not -(1 << (width - 1)) <= raw < 1 << (width - 1):  # rounding up to a power of 2
+            frac -= 1
+            raw = math.floor(value * 2**frac + 0.5)
+        return cls(value, raw, frac)
+
+    @property
+    def real(self) -> float:
+        return self.raw / 2**self.frac
+
+
+def shifted(fmt: Format, shift: int) -> Format:
+    """The same width with `shift` integer bits moved to the fraction."""
+    return Format(fmt.signed, fmt.int_bits - shift, fmt.frac_bits + shift)
+
+
+@dataclass(frozen=True)
+class Datapath:
+    """Formats per state component, the derived formats, constants and primitives."""
+
+    app: str
+    x: tuple[Format, ...]        # state components (particles, mu, ref, x - ref)
+    chol: tuple[Format, ...]     # row i of L scales state i: CHOL_SHIFT more fraction bits
+    noise: Format
+    weight: Format
+    angle: Format                # bot: bearings in turns, s0.(W-1); wraps modulo one turn
+    u: Format                    # whitened innovation
+    t: Format                    # exponent of the weight, w = 2^-t
+    consts: dict[str, Const]
+    cordic: Cordic | None
+    exp2: Exp2Neg
+    gyro: Format | None = None    # uav inputs: body rates, rad/s
+    accel: Format | None = None   # specific force, m/s^2 (also the C(q) a + g sum)
+    rot: Format | None = None     # entries of C(q)
+    h_frac: int = 0               # uav: h = omega dt/2 kept in one word with these fraction bits
+
+    @property
+    def n(self) -> int:
+        return len(self.x)
+
+    @property
+    def word(self) -> int:
+        return self.x[0].width
+
+    def cov_frac(self, i: int, j: int) -> int:
+        """Sigma_ij carries the fraction bits of L_i * L_j, so L = chol(Sigma) needs no shift."""
+        return self.chol[i].frac_bits + self.chol[j].frac_bits
+
+    def draws(self) -> int:
+        return {"bot": 6, "uav": 13}[self.app]
+
+
+def state_formats(cfg: Config) -> tuple[Format, ...]:
+    f = cfg.formats
+    if cfg.app == "bot":
+        return (f["state"],) * 4
+    return (f["quaternion"],) * 4 + (f["velocity"],) * 3
+
+
+def with_word(fmt: Format, word: int) -> Format:
+    """`fmt` resized to `word` bits, keeping its integer bits (the word-length study's knob)."""
+    return Format(fmt.signed, fmt.int_bits, word - fmt.int_bits - (1 if fmt.signed else 0))
+
+
+def datapath(cfg: Config, word: int | None = None) -> Datapath:
+    """The datapath of `cfg`; `word` resizes every line-rate operand (state, L, weight)."""
+    x = state_formats(cfg)
+    weight = cfg.weight
+    if word is not None:
+        x = tuple(with_word(fmt, word) for fmt in x)
+        weight = with_word(weight, word)
+    w = x[0].width
+    chol = tuple(shifted(fmt, CHOL_SHIFT) for fmt in x)
+    u = Format(True, U_INT_BITS, w - 1 - U_INT_BITS)
+    t = Format(False, T_INT_BITS, w - T_INT_BITS)
+    p = cfg.app_params
+    log2e = math.log2(math.e)
+    if cfg.app == "bot":
+        q, dt = p["process_var"], cfg.dt
+        consts = {
+            "T": Const.of(dt),
+            "a": Const.of(dt * dt / 2 * math.sqrt(q)),   # position gain of a process draw
+            "b": Const.of(dt * math.sqrt(q)),            # velocity gain
+            # u = d * c_u with d in turns: u^2 = d_rad^2 / (2 R) * log2(e)
+            "c_u": Const.of(2 * math.pi * math.sqrt(log2e / (2 * p["bearing_var"]))),
+        }
+        cordic = Cordic.for_widths(w, w - 1)
+        angle = Format(True, 0, w - 1)
+        return Datapath(cfg.app, x, chol, cfg.noise, weight, angle, u, t, consts, cordic,
+                        _exp2(t, weight))
+    dt = cfg.dt
+    consts = {
+        "c_u": Const.of(math.sqrt(log2e / 2) / p["sigma_v"]),
+        "dt": Const.of(dt),
+        "dt2": Const.of(dt / 2),
+        "s_w": Const.of(math.radians(p["sigma_omega_deg"])),
+        "s_a": Const.of(p["sigma_a"]),
+        **{f"g{n}": Const.of(g) for n, g in enumerate(GRAVITY)},
+    }
+    gyro = Format(True, UAV_GYRO_INT_BITS, w - 1 - UAV_GYRO_INT_BITS)
+    accel = Format(True, UAV_ACCEL_INT_BITS, w - 1 - UAV_ACCEL_INT_BITS)
+    # |omega dt/2| < 2^(gyro int bits) * dt/2: as many fraction bits as one word then holds
+    h_frac = w - 1 - UAV_GYRO_INT_BITS - (math.floor(math.log2(dt / 2)) + 1)
+    return Datapath(cfg.app, x, chol, cfg.noise, weight, Format(True, 0, w - 1), u, t, consts,
+                    None, _exp2(t, weight), gyro=gyro, accel=accel,
+                    rot=Format(True, 1, w - 2), h_frac=h_frac)
+
+
+def _exp2(t: Format, weight: Format) -> Exp2Neg:
+    return Exp2Neg.for_formats(in_width=t.width, in_frac=t.frac_bits, out_frac=weight.frac_bits)

@@ -1,0 +1,289 @@
+"""Scenarios (inputs, measurements, truth) for the GPF models, and their CSV files.
+
+Index k = 0..steps everywhere: row k of every array belongs to time t_k = k dt; row 0 holds the
+initial truth and NaN inputs/measurements; the inputs and measurement of row k >= 1 feed filter
+step k (from k-1 to k).
+
+CSV file: optional metadata lines `# key: <JSON>` (app, dt, mu0 = the filter's initial
+estimate, meta), then a header row, then one row per k = 0..steps. An empty field is "not
+given" (NaN): inputs and measurements in row 0, and truth anywhere (recorded data may have none).
+
+bot columns (2-D bearing-only tracking, seed 003):
+    k   -      step index, 0, 1, 2, ...
+    t   s      time t_k (uniform steps dt)
+    z   rad    bearing measured at t_k, atan2(py - oy, px - ox) + noise, in (-pi, pi]
+    ox  m      observer x at t_k
+    oy  m      observer y at t_k
+    px  m      truth: target x at t_k
+    vx  m/s    truth: target x velocity
+    py  m      truth: target y
+    vy  m/s    truth: target y velocity
+uav columns (quaternion attitude and ENU velocity, seed 002; body axes x forward, y left, z up):
+    k            -       step index
+    t            s       time t_k
+    wx, wy, wz   rad/s   gyro: body rate averaged over [t_{k-1}, t_k], plus noise
+    ax, ay, az   m/s^2   accelerometer: specific force (body) averaged over the same interval
+    vgE,vgN,vgU  m/s     GPS velocity at t_k (east, north, up), plus noise
+    q0..q3       -       truth: attitude quaternion at t_k, scalar first, body to ENU
+    vE, vN, vU   m/s     truth: velocity at t_k (east, north, up)
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gpf.model import flight
+from gpf.model.float_blocks import Array, bot_matrices, wrap_angle
+
+# per app: CSV columns in order, and which array each group of columns fills
+COLUMNS = {
+    "bot": ("k", "t", "z", "ox", "oy", "px", "vx", "py", "vy"),
+    "uav": ("k", "t", "wx", "wy", "wz", "ax", "ay", "az", "vgE", "vgN", "vgU",
+            "q0", "q1", "q2", "q3", "vE", "vN", "vU"),
+}
+INPUTS = {"bot": {"observer": ("ox", "oy")},
+          "uav": {"omega": ("wx", "wy", "wz"), "accel": ("ax", "ay", "az")}}
+MEASUREMENTS = {"bot": {"z": ("z",)}, "uav": {"v_gps": ("vgE", "vgN", "vgU")}}
+TRUTH = {"bot": ("px", "vx", "py", "vy"), "uav": ("q0", "q1", "q2", "q3", "vE", "vN", "vU")}
+# manoeuvring observer: escorts the target's nominal track (x0's velocity) and weaves across
+# the initial line of sight (origin to x0's position), one leg each way in turn
+OBSERVER_WEAVE = 3.0  # m/s across the line of sight
+OBSERVER_LEG = 3.0    # s per leg
+
+
+@dataclass
+class Scenario:
+    """Inputs, measurements and truth of one run; every array has steps + 1 rows."""
+
+    app: str                              # "bot" or "uav"
+    dt: float                             # s
+    t: Array                              # (steps+1,)
+    inputs: dict[str, Array]              # bot: observer (.., 2); uav: omega, accel (.., 3)
+    measurements: dict[str, Array]        # bot: z (steps+1,); uav: v_gps (.., 3)
+    truth: Array                          # (steps+1, n), NaN where unknown
+    mu0: Array | None = None              # the filter's initial estimate, if the scenario has one
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        return len(self.t) - 1
+
+    def step_inputs(self, k: int) -> dict[str, Any]:
+        """What filter step k (1..steps) consumes, as FloatGPF.step takes it."""
+        out = {name: a[k] for name, a in self.inputs.items()}
+        out.update({name: a[k] for name, a in self.measurements.items()})
+        return out
+
+
+def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str) -> Scenario:
+    """Truth x_0 ~ N(x0, diag(sigma0_diag)) (x0 is the seed's initial *mean*), then
+    x_k = Phi x_{k-1} + Gamma w; bearings with noise N(0, R) seen from observer[k]."""
+    p = cfg.app_params
+    rng = np.random.default_rng(seed)
+    phi, gamma = bot_matrices(cfg.dt)
+    truth = np.empty((steps + 1, 4))
+    truth[0] = np.array(p["x0"]) + np.sqrt(np.array(p["sigma0_diag"])) * rng.standard_normal(4)
+    w = math.sqrt(p["process_var"]) * rng.standard_normal((steps, 2))
+    for k in range(1, steps + 1):
+        truth[k] = phi @ truth[k - 1] + gamma @ w[k - 1]
+    z = np.full(steps + 1, np.nan)
+    noise = math.sqrt(p["bearing_var"]) * rng.standard_normal(steps)
+    rel = truth[1:, [0, 2]] - observer[1:]
+    z[1:] = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) + noise)
+    return Scenario("bot", cfg.dt, np.arange(steps + 1) * cfg.dt, {"observer": observer},
+                    {"z": z}, truth, np.array(p["x0"], dtype=float),
+                    {"generator": name, "seed": seed, "config": cfg.name})
+
+
+def bot_fixed_observer(cfg: Any, steps: int, seed: int) -> Scenario:
+    """Seed 003's scenario: observer at the origin, so the range is unobservable."""
+    observer = np.zeros((steps + 1, 2))
+    observer[0] = np.nan
+    return _bot(cfg, steps, seed, observer, "bot_fixed_observer")
+
+
+def observer_path(t: Array, base: Array, cross: Array, weave: float = OBSERVER_WEAVE,
+                  leg: float = OBSERVER_LEG) -> Array:
+    """Observer positions (.., 2) at times t: from the origin with velocity base + weave cross,
+    then base - weave cross, alternating every `leg` seconds."""
+    legs = int(np.ceil(max(float(np.max(t)), 0.0) / leg)) + 1
+    signs = np.where(np.arange(legs) % 2 == 0, 1.0, -1.0)
+    vel = np.asarray(base) + weave * signs[:, None] * np.asarray(cross)
+    knots = np.vstack([np.zeros(2), np.cumsum(leg * vel, axis=0)])
+    knots_t = leg * np.arange(legs + 1)
+    return np.stack([np.interp(t, knots_t, knots[:, 0]), np.interp(t, knots_t, knots[:, 1])], -1)
+
+
+def bot_manoeuvring_observer(cfg: Any, steps: int, seed: int) -> Scenario:
+    """The same target (same seed: same truth and noise) seen from an observer that moves with
+    the nominal target velocity (x0's) and weaves at OBSERVER_WEAVE m/s across the initial line
+    of sight in OBSERVER_LEG s legs (2.8-3.2 m/s for seed 003's x0): the observer's
+    accelerations make the range observable."""
+    x0 = np.array(cfg.app_params["x0"], dtype=float)
+    los = x0[[0, 2]] / np.hypot(x0[0], x0[2])
+    observer = observer_path(np.arange(steps + 1) * cfg.dt, x0[[1, 3]],
+                             np.array([los[1], -los[0]]))
+    observer[0] = np.nan
+    return _bot(cfg, steps, seed, observer, "bot_manoeuvring_observer")
+
+
+def uav_flight(cfg: Any, steps: int, seed: int) -> Scenario:
+    """`flight`'s profile (climb, coordinated turns, level flight at 15-17 m/s) with exact truth,
+    IMU noise N(0, sigma_w^2) and N(0, sigma_a^2) per sample, GPS velocity noise N(0, sigma_v^2)
+    every step. mu0 is the truth at k = 0 plus a draw from N(0, diag(sigma0_diag)), q normalised.
+    """
+    p = cfg.app_params
+    rng = np.random.default_rng(seed)
+    truth, omega, accel = flight.integrate(steps, cfg.dt)
+    mu0 = truth[0] + np.sqrt(np.array(p["sigma0_diag"])) * rng.standard_normal(7)
+    mu0[:4] /= np.linalg.norm(mu0[:4])
+
+    def noisy(clean: Array, sigma: float) -> Array:
+        out = np.full((steps + 1, 3), np.nan)
+        out[1:] = clean + sigma * rng.standard_normal((steps, 3))
+        return out
+
+    inputs = {"omega": noisy(omega, math.radians(p["sigma_omega_deg"])),
+              "accel": noisy(accel, p["sigma_a"])}
+    v_gps = noisy(truth[1:, 4:], p["sigma_v"])
+    return Scenario("uav", cfg.dt, np.arange(steps + 1) * cfg.dt, inputs, {"v_gps": v_gps},
+                    truth, mu0, {"generator": "uav_flight", "seed": seed, "config": cfg.name,
+                                 "profile": flight.PHASES})
+
+
+def _column_arrays(s: Scenario) -> dict[str, Array]:
+    cols: dict[str, Array] = {"k": np.arange(s.steps + 1), "t": s.t}
+    for group in (INPUTS[s.app], MEASUREMENTS[s.app], {"truth": TRUTH[s.app]}):
+        for name, names in group.items():
+            a = s.truth if name == "truth" else {**s.inputs, **s.measurements}[name]
+            a = a.reshape(len(s.t), -1)
+            cols.update({c: a[:, i] for i, c in enumerate(names)})
+    return cols
+
+
+def write_csv(scenario: Scenario, path: str | Path) -> None:
+    """Write the metadata lines, the header and one row per k (floats exact: shortest repr)."""
+    cols = _column_arrays(scenario)
+    names = COLUMNS[scenario.app]
+    lines = [f"# app: {json.dumps(scenario.app)}", f"# dt: {json.dumps(float(scenario.dt))}"]
+    if scenario.mu0 is not None:
+        lines.append(f"# mu0: {json.dumps([float(x) for x in scenario.mu0])}")
+    lines += [f"# meta: {json.dumps(scenario.meta)}", ",".join(names)]
+    for k in range(scenario.steps + 1):
+        fields = [str(k)] + ["" if math.isnan(v := float(cols[c][k])) else repr(v)
+                             for c in names[1:]]
+        lines.append(",".join(fields))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def read_csv(path: str | Path) -> Scenario:
+    """Read a scenario CSV; a malformed file raises a one-line ValueError naming the file, the
+    row (and its line number) and the column."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    header_at = 0
+    info: dict[str, Any] = {}
+    while header_at < len(lines) and (lines[header_at].startswith("#")
+                                      or not lines[header_at].strip()):
+        _read_meta(path, header_at + 1, lines[header_at], info)
+        header_at += 1
+    if header_at == len(lines):
+        raise ValueError(f"{path}: no header row")
+    app = _read_header(path, header_at + 1, lines[header_at])
+    if info.get("app", app) != app:
+        raise ValueError(f"{path}: metadata app {info['app']!r} but the columns are {app}'s")
+    names = COLUMNS[app]
+    required = {c for group in (INPUTS[app], MEASUREMENTS[app]) for cs in group.values()
+                for c in cs}
+    rows: list[list[float]] = []
+    for ln, text in enumerate(lines[header_at + 1:], start=header_at + 2):
+        if not text.strip():
+            continue
+        fields = next(csv.reader([text]))
+        r = len(rows)
+        where = f"{path}: row {r} (line {ln})"
+        if len(fields) != len(names):
+            raise ValueError(f"{where}: {len(fields)} fields, expected {len(names)}: "
+                             + ",".join(names))
+        row = []
+        for c, f in zip(names, fields, strict=True):
+            f = f.strip()
+            if not f and c not in ("k", "t") and (r == 0 or c not in required):
+                row.append(math.nan)
+                continue
+            try:
+                v = float(f)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                raise ValueError(f"{where}, column '{c}': {f!r} is not a finite number")
+            if c == "k" and v != r:
+                raise ValueError(f"{where}, column 'k': {f}, expected {r}")
+            row.append(v)
+        rows.append(row)
+    if len(rows) < 2:
+        raise ValueError(f"{path}: {len(rows)} data rows; need k = 0 and at least one step")
+    cols = dict(zip(names, np.array(rows).T, strict=True))
+    t = cols["t"]
+    dt = float(info.get("dt", t[1] - t[0]))
+    bad = np.flatnonzero(np.abs(t - (t[0] + np.arange(len(t)) * dt)) > 1e-9 * np.maximum(1, t))
+    if not dt > 0 or len(bad):
+        r = int(bad[0]) if len(bad) else 1
+        raise ValueError(f"{path}: row {r} (line {header_at + 2 + r}), column 't': {t[r]!r} is "
+                         f"not t_0 + k dt with dt = {dt!r} > 0")
+    mu0 = info.get("mu0")
+    if mu0 is not None and len(mu0) != len(TRUTH[app]):
+        raise ValueError(f"{path}: metadata mu0 has {len(mu0)} numbers, {app} needs "
+                         f"{len(TRUTH[app])}")
+
+    def group(cs: tuple[str, ...]) -> Array:
+        return cols[cs[0]].copy() if len(cs) == 1 else np.stack([cols[c] for c in cs], axis=1)
+
+    return Scenario(app, dt, t, {n: group(cs) for n, cs in INPUTS[app].items()},
+                    {n: group(cs) for n, cs in MEASUREMENTS[app].items()}, group(TRUTH[app]),
+                    None if mu0 is None else np.array(mu0, dtype=float), info.get("meta", {}))
+
+
+def _read_meta(path: Path, ln: int, text: str, info: dict[str, Any]) -> None:
+    """`# key: <JSON>` for key in app, dt, mu0, meta; other comment lines are ignored."""
+    key, sep, value = text.lstrip("#").partition(":")
+    key = key.strip()
+    if not sep or key not in ("app", "dt", "mu0", "meta"):
+        return
+    try:
+        val = json.loads(value)
+    except json.JSONDecodeError:
+        val = None
+    ok = {"app": lambda v: v in COLUMNS, "meta": lambda v: isinstance(v, dict),
+          "dt": lambda v: isinstance(v, int | float) and math.isfinite(v) and v > 0,
+          "mu0": lambda v: isinstance(v, list) and all(
+              isinstance(x, int | float) and math.isfinite(x) for x in v)}[key]
+    if val is None or isinstance(val, bool) or not ok(val):
+        raise ValueError(f"{path}: line {ln}: metadata {key} = {value.strip()!r} is not valid")
+    info[key] = val
+
+
+def _read_header(path: Path, ln: int, text: str) -> str:
+    """The app whose columns the header names; else an error naming the first wrong column."""
+    header = [h.strip() for h in next(csv.reader([text]))]
+    for app, names in COLUMNS.items():
+        if tuple(header) == names:
+            return app
+    app = "uav" if len(header) > 2 and header[2] == "wx" else "bot"
+    names = COLUMNS[app]
+    j = next((j for j, (got, want) in enumerate(zip(header, names, strict=False))
+              if got != want), min(len(header), len(names)))
+    got = repr(header[j]) if j < len(header) else "missing"
+    want = repr(names[j]) if j < len(names) else "no more columns"
+    raise ValueError(f"{path}: line {ln} (header), column {j + 1}: {got}, expected {want} "
+                     f"({app} columns: {','.join(names)})")
