@@ -14,7 +14,7 @@ from enum import IntFlag
 import numpy as np
 
 from gpf.model.fixed import Format, saturate, shift_round
-from gpf.model.formats import CHOL_FLOOR_LSB, INV_GUARD, Const, Datapath
+from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS, INV_GUARD, Const, Datapath
 from gpf.model.primitives import div_round, sqrt_round
 
 
@@ -159,10 +159,11 @@ def whiten(dp: Datapath, d: np.ndarray, d_frac: int) -> np.ndarray:
     return np.clip(u, dp.u.min_raw, dp.u.max_raw)
 
 
-def wrap_angle(raw: np.ndarray, fmt: Format) -> np.ndarray:
-    """Binary angles wrap modulo one turn: two's complement in fmt's width."""
-    span = 1 << fmt.width
-    return ((raw - fmt.min_raw) % span) + fmt.min_raw
+def wrap_angle(raw: np.ndarray, frac: int) -> np.ndarray:
+    """Binary angles (one turn = 2^frac) wrap modulo one turn into [-1/2, 1/2) turn: the
+    two's complement wrap of a `frac`-bit word, the intended modular arithmetic of angles."""
+    half = 1 << (frac - 1)
+    return ((raw + half) % (1 << frac)) - half
 
 
 def weight_bot(dp: Datapath, x: np.ndarray, z: int, obs: tuple[int, int]
@@ -171,8 +172,8 @@ def weight_bot(dp: Datapath, x: np.ndarray, z: int, obs: tuple[int, int]
     dx, f1 = saturate(x[:, 0] - obs[0], dp.x[0])
     dy, f2 = saturate(x[:, 2] - obs[1], dp.x[2])
     theta = dp.cordic.atan2(dy, dx)
-    d = wrap_angle(np.int64(z) - theta, dp.angle)
-    t = exponent_from_u(dp, [whiten(dp, d, dp.angle.frac_bits)])
+    d = wrap_angle(np.int64(z) - theta, dp.angle_frac)
+    t = exponent_from_u(dp, [whiten(dp, d, dp.angle_frac)])
     return dp.exp2(t), _any(f1, Flag.SAT) | _any(f2, Flag.SAT)
 
 
@@ -194,7 +195,21 @@ class Sums:
 
     w: int                  # sum w, weight fraction bits
     s1: list[int]           # sum w dx_i, fraction bits weight + x_i
-    s2: dict[tuple[int, int], int]  # sum round(w dx_i) dx_j (i >= j), fraction x_i + x_j
+    s2: dict[tuple[int, int], int]  # sum p_i dx_j (i >= j), fraction x_i + x_j + p_guard
+    p_guard: int            # p_i = w dx_i keeps this many bits below x_i's LSB
+
+
+def product_guard(dp: Datapath) -> int:
+    """Guard bits of p = w dx: as many as keep p dx within 62 bits (at most the weight's
+    fraction, where p is exact). Small weights would otherwise round p to nothing."""
+    return max(0, min(dp.weight.frac_bits, 62 - 2 * dp.word))
+
+
+def exact_sum(values: np.ndarray) -> int:
+    """The exact sum of int64 values of up to 62 bits (what a wide accumulator holds)."""
+    high = values >> 31
+    low = values & ((1 << 31) - 1)
+    return (int(high.sum(dtype=np.int64)) << 31) + int(low.sum(dtype=np.int64))
 
 
 def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
@@ -205,12 +220,12 @@ def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
     for i in range(dp.n):
         dx[:, i], f = saturate(x[:, i] - ref[i], dp.x[i])
         flags |= _any(f, Flag.SAT)
-    fw = dp.weight.frac_bits
+    guard = product_guard(dp)
     wdx = w[:, None] * dx                       # exact: weight x state bits
-    p = shift_round(wdx, fw, "half_up", width=62)  # round(w dx_i), |w| <= 1: fits x_i
-    s1 = [int(v) for v in wdx.sum(axis=0, dtype=np.int64)]
-    s2 = {(i, j): int((p[:, i] * dx[:, j]).sum(dtype=np.int64)) for i, j in pairs}
-    return Sums(int(w.sum(dtype=np.int64)), s1, s2), flags
+    p = shift_round(wdx, dp.weight.frac_bits - guard, "half_up", width=62)  # |w| <= 1
+    s1 = [exact_sum(wdx[:, i]) for i in range(dp.n)]
+    s2 = {(i, j): exact_sum(p[:, i] * dx[:, j]) for i, j in pairs}
+    return Sums(int(w.sum(dtype=np.int64)), s1, s2, guard), flags
 
 
 def finalise(dp: Datapath, sums: Sums, ref: np.ndarray, pairs: list[tuple[int, int]]
@@ -233,8 +248,9 @@ def finalise(dp: Datapath, sums: Sums, ref: np.ndarray, pairs: list[tuple[int, i
         flags |= _any(f, Flag.SAT)
     sigma = {}
     for i, j in pairs:
-        # S2: fraction x_i + x_j; W: weight fraction; Sigma_ij: cov_frac(i, j)
-        shift = dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits - dp.x[j].frac_bits
+        # S2: fraction x_i + x_j + guard; W: weight fraction; Sigma_ij: cov_frac(i, j)
+        shift = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits
+                 - dp.x[j].frac_bits - sums.p_guard)
         sigma[(i, j)] = int(div_round(sums.s2[(i, j)], sums.w, shift)) - m[i] * m[j]
     return mu, sigma, flags
 
@@ -267,30 +283,35 @@ def cov_pairs(dp: Datapath, covariance: str) -> list[tuple[int, int]]:
 def cholesky(dp: Datapath, sigma: dict[tuple[int, int], int]) -> tuple[np.ndarray, int]:
     """L with Sigma = L L^T: n square roots, n reciprocals, exact integer arithmetic.
 
-    A pivot below (CHOL_FLOOR_LSB LSB of L)^2 is raised to it (flag NOT_PD): the filter keeps
-    a valid factor when the covariance is singular or not positive definite.
+    A pivot below max((CHOL_FLOOR_LSB LSB of L)^2, Sigma_jj 2^-CHOL_FLOOR_REL_BITS) is raised
+    to that floor and its column below the
+    diagonal set to 0 (flag NOT_PD): the filter keeps a valid factor when the covariance is
+    singular or not positive definite.
     """
     n, flags = dp.n, 0
     chol = np.zeros((n, n), dtype=np.int64)
-    inv = [0] * n
     for j in range(n):
         fj = dp.chol[j].frac_bits
-        if (j, j) not in sigma:
-            continue
         d = sigma[(j, j)] - sum(int(chol[j, k]) ** 2 for k in range(j))   # fraction 2 fj
-        floor = CHOL_FLOOR_LSB**2
-        if d < floor:
+        # below a floor relative to the diagonal the pivot is rounding residue of a (near)
+        # singular direction: give it the floor's spread and no correlation rather than
+        # divide that residue by a tiny pivot
+        floor = max(CHOL_FLOOR_LSB**2, sigma[(j, j)] >> CHOL_FLOOR_REL_BITS)
+        floored = d < floor
+        if floored:
             d, flags = floor, flags | Flag.NOT_PD
         ljj, f = saturate(int(sqrt_round(d, 2 * fj, fj)), dp.chol[j])
         chol[j, j] = ljj
         flags |= _any(f, Flag.SAT)
-        inv[j] = int(div_round(1, int(ljj), fj + fj + INV_GUARD))  # 1/L_jj, fraction fj+G
+        if floored:
+            continue
+        inv = int(div_round(1, int(ljj), 2 * fj + INV_GUARD))   # 1/L_jj, fraction fj + G
         for i in range(j + 1, n):
             if (i, j) not in sigma:
                 continue
             num = sigma[(i, j)] - sum(int(chol[i, k]) * int(chol[j, k]) for k in range(j))
             # num: fraction fi + fj; inv: fj + G; L_ij: fi
-            value = int(shift_round(num * inv[j], 2 * fj + INV_GUARD, "half_up", width=200))
+            value = int(shift_round(num * inv, 2 * fj + INV_GUARD, "half_up", width=200))
             chol[i, j], f = saturate(value, dp.chol[i])
             flags |= _any(f, Flag.SAT)
     return chol, flags

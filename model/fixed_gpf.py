@@ -104,8 +104,8 @@ class FixedGPF:
         dp = self.dp
         if dp.app == "bot":
             turns = float(raw_inputs["z"]) / (2 * math.pi)
-            z = blocks.wrap_angle(np.int64(math.floor(turns * 2**dp.angle.frac_bits + 0.5)),
-                                  dp.angle)
+            z = blocks.wrap_angle(np.int64(math.floor(turns * 2**dp.angle_frac + 0.5)),
+                                  dp.angle_frac)
             obs = [int(dp.x[k].from_real(float(v))[0]) for k, v in
                    zip((0, 2), raw_inputs["observer"], strict=True)]
             return {"z": int(z), "observer": tuple(obs)}

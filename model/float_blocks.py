@@ -89,15 +89,29 @@ def omega_matrix(w: Array) -> Array:
 
 def propagate_uav(x: Array, e_gyro: Array, e_acc: Array, omega: Array, a: Array,
                   cfg: Any) -> Array:
-    """One IMU step of every particle; x (N, 7), e_gyro and e_acc (N, 3), omega and a (3,)."""
+    """One IMU step of every particle; x (N, 7), e_gyro and e_acc (N, 3), omega and a (3,).
+
+    Written out per component (the same sums as omega_matrix(w) @ q and rotation_matrix(q) @ a,
+    without building N small matrices): C(q) f = (q0^2 - |u|^2) f + 2 (u.f) u + 2 q0 (u x f),
+    u = (q1, q2, q3), is the homogeneous form for any norm of q.
+    """
     p = cfg.app_params
     dt = cfg.dt
-    w = omega + math.radians(p["sigma_omega_deg"]) * e_gyro
-    f = a + p["sigma_a"] * e_acc
-    q, v = x[:, :4], x[:, 4:]
-    q_new = q + (0.5 * dt) * np.einsum("nij,nj->ni", omega_matrix(w), q)
-    v_new = v + (np.einsum("nij,nj->ni", rotation_matrix(q), f) + GRAVITY) * dt
-    return np.concatenate([q_new, v_new], axis=1)
+    wx, wy, wz = (omega + math.radians(p["sigma_omega_deg"]) * e_gyro).T
+    fx, fy, fz = (a + p["sigma_a"] * e_acc).T
+    q0, q1, q2, q3 = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
+    h = 0.5 * dt
+    out = np.empty_like(x)
+    out[:, 0] = q0 + h * (-wx * q1 - wy * q2 - wz * q3)
+    out[:, 1] = q1 + h * (wx * q0 + wz * q2 - wy * q3)
+    out[:, 2] = q2 + h * (wy * q0 - wz * q1 + wx * q3)
+    out[:, 3] = q3 + h * (wz * q0 + wy * q1 - wx * q2)
+    s = q0 * q0 - (q1 * q1 + q2 * q2 + q3 * q3)
+    uf2 = 2 * (q1 * fx + q2 * fy + q3 * fz)
+    out[:, 4] = x[:, 4] + (s * fx + uf2 * q1 + 2 * q0 * (q2 * fz - q3 * fy) + GRAVITY[0]) * dt
+    out[:, 5] = x[:, 5] + (s * fy + uf2 * q2 + 2 * q0 * (q3 * fx - q1 * fz) + GRAVITY[1]) * dt
+    out[:, 6] = x[:, 6] + (s * fz + uf2 * q3 + 2 * q0 * (q1 * fy - q2 * fx) + GRAVITY[2]) * dt
+    return out
 
 
 def weight_uav(x: Array, v_gps: Array, cfg: Any) -> Array:
@@ -127,7 +141,9 @@ def moments(x: Array, w: Array, ref: Array, app: str, covariance: str = "full", 
     mu = ref + m
     sigma = s2 / total - np.outer(m, m)
     if app == "uav":
-        mu[:4] /= np.linalg.norm(mu[:4])
+        norm = np.linalg.norm(mu[:4])
+        if norm > 0:  # a zero quaternion is left as it is, as in fixed point
+            mu[:4] /= norm
         if covariance == "block":
             sigma[:4, 4:] = 0.0
             sigma[4:, :4] = 0.0

@@ -138,14 +138,18 @@ class FloatGPF:
 
     def run(self, scenario: Scenario, draws: Array | None = None,
             rng: np.random.Generator | None = None) -> RunResult:
-        """Filter the whole scenario. draws: (steps, N, D), row k-1 feeds step k; else they come
-        from rng (default: numpy's PCG64 seeded with cfg.grng.seed), one (N, D) block a step."""
+        """Filter the whole scenario. draws: (steps, N, D), row k-1 feeds step k (N may differ
+        from self.particles); else they come from rng (default: numpy's PCG64 seeded with
+        cfg.grng.seed), one (N, D) block a step."""
+        if scenario.app != self.app:
+            raise ValueError(f"scenario is for app {scenario.app!r}, the filter for {self.app!r}")
         steps, n = scenario.steps, self.n
         shape = (self.particles, self.draws_per_particle)
         if draws is not None:
             draws = np.asarray(draws, dtype=float)
-            if draws.shape != (steps, *shape):
-                raise ValueError(f"draws: shape {draws.shape}, expected {(steps, *shape)}")
+            if draws.ndim != 3 or draws.shape[0] != steps or draws.shape[2] != shape[1]:
+                raise ValueError(f"draws: shape {draws.shape}, expected (steps = {steps}, N, "
+                                 f"D = {shape[1]})")
         elif rng is None:
             rng = np.random.default_rng(self.cfg.grng.seed)
         mu, sigma = self.initial(scenario)
@@ -163,7 +167,8 @@ class FloatGPF:
             for name in res.flags:
                 flags[name][k] = True
         return RunResult(out_mu, out_sigma, flags, ess,
-                         meta={"particles": self.particles, "config": self.cfg.name})
+                         meta={"particles": self.particles if draws is None else draws.shape[1],
+                               "config": self.cfg.name})
 
 
 def position_error(est: Array, truth: Array) -> Array:

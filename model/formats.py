@@ -15,9 +15,10 @@ from gpf.model.fixed import Format
 from gpf.model.primitives import Cordic, Exp2Neg
 
 CONST_WIDTH = 18     # constants are one 18-bit DSP operand
-CHOL_SHIFT = 3       # L entries carry 3 more fraction bits than the state they scale
+CHOL_SHIFT = 3       # L entries carry up to 3 more fraction bits than the state they scale
 INV_GUARD = 8        # extra fraction bits of 1/L_jj in the Cholesky
-CHOL_FLOOR_LSB = 256  # regularisation: a pivot below (256 LSB of L)^2 is raised to it
+CHOL_FLOOR_LSB = 16  # regularisation: a Cholesky pivot below (16 LSB of L)^2 or below
+CHOL_FLOOR_REL_BITS = 16  # 2^-16 of its diagonal entry is raised to that floor
 T_INT_BITS = 8       # 2^-t underflows to 0 long before t = 256
 U_INT_BITS = 4       # u = whitened innovation, t = u^2 (or a sum of squares) < 256
 UAV_GYRO_INT_BITS = 2    # body rates within +-4 rad/s
@@ -62,7 +63,8 @@ class Datapath:
     chol: tuple[Format, ...]     # row i of L scales state i: CHOL_SHIFT more fraction bits
     noise: Format
     weight: Format
-    angle: Format                # bot: bearings in turns, s0.(W-1); wraps modulo one turn
+    angle_frac: int              # bot: bearings in turns, one turn = 2^W: a W-bit binary
+                                 # angle in [-1/2, 1/2) turn that wraps modulo one turn
     u: Format                    # whitened innovation
     t: Format                    # exponent of the weight, w = 2^-t
     consts: dict[str, Const]
@@ -109,7 +111,7 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
         x = tuple(with_word(fmt, word) for fmt in x)
         weight = with_word(weight, word)
     w = x[0].width
-    chol = tuple(shifted(fmt, CHOL_SHIFT) for fmt in x)
+    chol = tuple(shifted(fmt, min(CHOL_SHIFT, fmt.int_bits)) for fmt in x)
     u = Format(True, U_INT_BITS, w - 1 - U_INT_BITS)
     t = Format(False, T_INT_BITS, w - T_INT_BITS)
     p = cfg.app_params
@@ -123,9 +125,8 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
             # u = d * c_u with d in turns: u^2 = d_rad^2 / (2 R) * log2(e)
             "c_u": Const.of(2 * math.pi * math.sqrt(log2e / (2 * p["bearing_var"]))),
         }
-        cordic = Cordic.for_widths(w, w - 1)
-        angle = Format(True, 0, w - 1)
-        return Datapath(cfg.app, x, chol, cfg.noise, weight, angle, u, t, consts, cordic,
+        cordic = Cordic.for_widths(w, w)
+        return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts, cordic,
                         _exp2(t, weight))
     dt = cfg.dt
     consts = {
@@ -140,7 +141,7 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
     accel = Format(True, UAV_ACCEL_INT_BITS, w - 1 - UAV_ACCEL_INT_BITS)
     # |omega dt/2| < 2^(gyro int bits) * dt/2: as many fraction bits as one word then holds
     h_frac = w - 1 - UAV_GYRO_INT_BITS - (math.floor(math.log2(dt / 2)) + 1)
-    return Datapath(cfg.app, x, chol, cfg.noise, weight, Format(True, 0, w - 1), u, t, consts,
+    return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts,
                     None, _exp2(t, weight), gyro=gyro, accel=accel,
                     rot=Format(True, 1, w - 2), h_frac=h_frac)
 

@@ -10,6 +10,7 @@ RTL; `constants()` gives them with the parameters as a JSON-able dict for the ge
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 from functools import cached_property
@@ -28,24 +29,28 @@ _I64_MIN, _I64_MAX = -(1 << 63), (1 << 63) - 1
 
 @dataclass(frozen=True)
 class Cordic:
-    """atan2(y, x) by CORDIC in vectoring mode, as a binary angle s0.A in turns (1 turn = 2 pi).
+    """atan2(y, x) by CORDIC in vectoring mode, as a binary angle in turns (1 turn = 2 pi).
 
-    W = in_width, A = angle_frac, G = guard_bits, N = iterations. X, Y are signed W+G+2 bits
-    (x, y are within W bits; the pre-rotation's negation of -2^(W-1) needs one bit, the gain
-    K = 1.6468 times |(x, y)| <= sqrt(2) 2^(W-1) < 2.33 2^(W-1) the other). z is A+G+1 bits, a
-    binary angle in units of 2^-(A+G) turn that wraps modulo one turn (two's complement).
+    W = in_width, A = angle_frac, G = guard_bits, N = iterations. The result has A fraction
+    bits of a turn and lies in [-2^(A-1), 2^(A-1)), i.e. [-0.5, 0.5) turn: an A-bit two's
+    complement binary angle, so one turn is 2^A and wrapping is modulo one turn. (It also fits
+    Format s0.A, whose top bit is then a copy of the sign; wrap differences modulo 2^A.)
+    X, Y are signed W+G+2 bits: |(x, y)| <= sqrt(2) 2^(W-1) (W+G+1 bits hold -(-2^(W-1)) << G),
+    times the gain K = 1.6468 is < 2.33 2^(W-1+G), plus < 2.4 N truncation units (< sqrt(2)
+    a step, times at most K): < 2^(W+G+1) since 2.4 N < 1.67 2^(W+G-1) for any sane N.
+    z is A+G bits, units 2^-(A+G) turn, wrapping modulo one turn (two's complement).
       1. X = x << G, Y = y << G.
       2. X < 0 and Y >= 0: X, Y, z = Y, -X, +Q;  X < 0 and Y < 0: X, Y, z = -Y, X, -Q;
          else z = 0.  Q = 2^(A+G-2), a quarter turn. Now X >= 0, and X never decreases.
       3. For i = 0 .. N-1: Y >= 0: X, Y, z = X + (Y >> i), Y - (X >> i), z + ANGLE[i]
                            Y < 0:  X, Y, z = X - (Y >> i), Y + (X >> i), z - ANGLE[i]
-         ANGLE[i] = round_half_up(atan(2^-i) / (2 pi) 2^(A+G)).
-      4. out = (z + 2^(G-1)) >> G (z if G = 0), wrapped to A+1 bits: a half turn comes out as
-         -2^A, the same binary angle. Wrapping z before or after rounding gives the same bits.
-      5. x == 0 and y == 0 forces out = 0 (a zero detect on the inputs): step 3 alone would
-         give sum(ANGLE) >> G there, since Y >= 0 rotates up at every step.
-    The model keeps z unbounded and wraps once at the end (equal modulo 2^(A+G+1)) and checks
-    that X and Y stay inside W+G+2 bits.
+         ANGLE[i] = round_half_up(atan(2^-i) / (2 pi) 2^(A+G)) (ANGLE[0] = 2^(A+G-3)).
+      4. out = (z + 2^(G-1)) >> G (z if G = 0), wrapped to A bits: a half turn comes out as
+         -2^(A-1). Wrapping z (A+G bits) before rounding gives the same bits.
+      5. x == 0 and y == 0 forces out = 0 (a zero detect on the inputs): steps 1-4 alone give
+         sum(ANGLE) >> G there (Y = 0 counts as Y >= 0, so every step rotates up).
+    The model keeps z unbounded and wraps once at the end, and checks that X and Y stay within
+    W+G+2 bits.
     """
 
     in_width: int
@@ -61,17 +66,21 @@ class Cordic:
 
     @classmethod
     def for_widths(cls, in_width: int, angle_frac: int) -> Cordic:
-        """N = A iterations, G = max(A - 2, 0) guard bits: max error <= 1.5 output LSB.
+        """N = A iterations and G = A guard bits.
 
-        The residual angle after N steps is at most atan(2^-(N-1)) = 1/pi LSB. The X/Y
-        truncation error is an angle of order N 2^-G rad over the smallest vectors
-        (|(x, y)| ~ 1 raw), whatever W: a worst-case sum gives G ~ A + 2, but the measured
-        error (all |x|, |y| < 128 plus 2e5 pairs below 2^11, A = 4 .. 23; values do not depend
-        on W) is <= 1.04 LSB with G = A - 2 and up to 2 LSB with G = A - 3. Measured maxima
-        are in the tests (exhaustive for W = 8) and the README.
+        Error sources, in output LSBs: the final rounding 1/2; the residual angle after N steps,
+        at most atan(2^-(N-1)) = 1/pi; the table roundings N 2^-(G+1); the X/Y truncations,
+        about N 2^-G rad over the smallest vectors (|(x, y)| = 1 raw, for any W), for which a
+        worst-case sum asks G ~ A + 2 but measurements need far less. Measured with N = A over
+        all |x|, |y| < 128 and 2e5 pairs below 2^11 for A = 4 .. 23: max error <= 0.82 LSB for
+        G = A, up to 1.04 for G = A - 2, up to 2 for G = A - 3; G = A - 1 misses a few axis and
+        diagonal points with |x|, |y| <= 5, G = A makes all of them exact (checked for every
+        magnitude at W = 24, A = 23 and W = 20, A = 19). Chosen parameters, max error: W = 8,
+        A = 10: 0.817 (exhaustive); W = 8, A = 12: 0.806 (exhaustive); W = 24, A = 23: 0.818
+        (1e7 random pairs and all |x|, |y| <= 256); W = 20, A = 19: 0.820.
         """
         a = _count(angle_frac, "angle_frac")
-        return cls(in_width, a, max(a, 1), max(a - 2, 0))
+        return cls(in_width, a, a, a)
 
     @property
     def xy_width(self) -> int:
@@ -79,11 +88,11 @@ class Cordic:
 
     @property
     def z_width(self) -> int:
-        return self.angle_frac + self.guard_bits + 1
+        return self.angle_frac + self.guard_bits
 
     @cached_property
     def angles(self) -> tuple[int, ...]:
-        """ANGLE[i] in units of 2^-(A+G) turn, exact (big-integer series, no libm)."""
+        """ANGLE[i] in units of 2^-(A+G) turn: big-integer series to 96 extra bits, no libm."""
         frac = self.angle_frac + self.guard_bits
         prec = frac + 96
         pi = 16 * _atan_inv(5, prec) - 4 * _atan_inv(239, prec)
@@ -91,19 +100,20 @@ class Cordic:
         return tuple(((t << frac) + pi) // (2 * pi) for t in atans)  # round(t / (2 pi))
 
     def constants(self) -> dict[str, Any]:
-        return {**asdict(self), "xy_width": self.xy_width, "z_width": self.z_width,
-                "quarter": 1 << (self.angle_frac + self.guard_bits - 2),
+        return {**asdict(self), "out_width": self.angle_frac, "xy_width": self.xy_width,
+                "z_width": self.z_width, "quarter": 1 << (self.angle_frac + self.guard_bits - 2),
                 "angles": list(self.angles)}
 
     def atan2(self, y: Any, x: Any) -> Any:
-        """Raw angle (int64, A fraction bits of a turn) of raw y, x (signed in_width bits)."""
+        """Raw angle (int64, A fraction bits of a turn, [-2^(A-1), 2^(A-1))) of raw y, x
+        (signed in_width bits, the same format)."""
         yv, xv, shape, scalar = _pair(y, x, self.in_width, "Cordic input")
         z, lo, hi = self._vectoring(yv, xv)
         if lo < -(1 << (self.xy_width - 1)) or hi >= 1 << (self.xy_width - 1):
             raise AssertionError(f"{self}: X/Y overflow [{lo}, {hi}]")  # excluded by analysis
         g, a = self.guard_bits, self.angle_frac
         r = (z + (1 << g >> 1)) >> g
-        out = ((r + (1 << a)) & ((2 << a) - 1)) - (1 << a)
+        out = ((r + (1 << a >> 1)) & ((1 << a) - 1)) - (1 << a >> 1)
         out = np.where((xv == 0) & (yv == 0), 0, out)
         return _finish(out, shape, scalar)
 
@@ -139,9 +149,11 @@ class Exp2Neg:
       3. s = n + G; w = (m + 2^(s-1)) >> s (w = m if s = 0); w = 0 when s > F+G+1 (the width of
          m), exactly what the formula gives there, so the shifter needs only F+G+2 positions.
     BASE[k] = round_half_up(2^(-k/2^L) 2^(F+G)), k = 0 .. 2^L (BASE[2^L] = 2^(F+G-1)), exact;
-    SLOPE[k] = BASE[k+1] - BASE[k]. w is non-increasing in t; w(0) = 2^F. w = 0 exactly when
-    m < 2^(s-1): always for t >= F+2, never for t <= F+1 (exact 2^-t >= half an LSB), and for
-    F+1 < t < F+2 (exact value below half an LSB) unless m rounded up to 2^(F+G).
+    SLOPE[k] = BASE[k+1] - BASE[k]. w(0) = 2^F. w is non-increasing in t: BASE is, SLOPE <= 0,
+    and m at r = 2^R - 1 is >= BASE[k+1]. Underflow: w = 0 exactly when m < 2^(s-1); since
+    2^(F+G-1) <= m <= 2^(F+G) that is always when t >= F+2, never when t <= F+1 (where the
+    exact value is >= half an LSB), and for F+1 < t < F+2 (exact value below half an LSB)
+    unless m rounded up to 2^(F+G). So w = 0 implies 2^-t < 2^-(F+1).
     """
 
     in_width: int
@@ -154,22 +166,25 @@ class Exp2Neg:
         _check_counts(self, in_width=1, in_frac=0, out_frac=0, lut_bits=0, guard_bits=0)
         if self.in_frac > self.in_width or self.in_width > 62:
             raise ValueError(f"{self}: need in_frac <= in_width <= 62")
+        if self.out_frac + self.guard_bits < 1:
+            raise ValueError(f"{self}: need out_frac + guard_bits >= 1")
         if self.out_frac + self.guard_bits + max(self.in_frac - self.lut_bits, 0) > 60:
             raise ValueError(f"{self}: the interpolation product must fit in 62 bits")
 
     @classmethod
     def for_formats(cls, in_width: int, in_frac: int, out_frac: int) -> Exp2Neg:
-        """The smallest L (then G <= 8) whose `error_bound()` is <= 1 output LSB."""
+        """The smallest L <= in_frac, then the smallest G <= 8, with `error_bound()` <= 1."""
         for lut in range(in_frac + 1):
-            for guard in range(9):
+            for guard in range(0 if out_frac else 1, 9):
                 e = cls(in_width, in_frac, out_frac, lut, guard)
                 if e.error_bound() <= 1.0:
                     return e
         raise AssertionError("unreachable: L = in_frac, G = 1 gives 1.0")
 
     def error_bound(self) -> float:
-        """Output LSBs: 1/2 (last rounding) + 2^-G (BASE and product roundings, 1/2 + 1/2 in
-        units of m) + chord error (ln 2)^2 / 8 2^(F-2L) (none when R = 0)."""
+        """A rigorous bound on |w - 2^-t 2^F|, output LSBs: 1/2 (last rounding) + 2^-G (BASE
+        rounding 1/2, product rounding 1/2, in units of m; just 1/2 when R = 0) + the chord
+        error of linear interpolation, h^2/8 max|f''| = (ln 2)^2 / 8 2^(F-2L) (0 when R = 0)."""
         chord = 0.0 if self.in_frac <= self.lut_bits else math.log(2) ** 2 / 8 * 2.0 ** (
             self.out_frac - 2 * self.lut_bits)
         return 0.5 + 2.0**-self.guard_bits * (1.0 if chord else 0.5) + chord
@@ -178,13 +193,9 @@ class Exp2Neg:
     def rem_bits(self) -> int:
         return max(self.in_frac - self.lut_bits, 0)
 
-    @cached_property
+    @property
     def base(self) -> tuple[int, ...]:
-        big, seg = self.out_frac + self.guard_bits, 1 << self.lut_bits
-        # round(2^(e/seg)) = (floor(2^((e+seg)/seg)) + 1) >> 1; floor of a 2^L-th root = L
-        # nested isqrt (floor(sqrt(floor(v))) = floor(sqrt(v))).
-        return tuple((_iroot_pow2(seg * (big + 1) - k, self.lut_bits) + 1) >> 1
-                     for k in range(seg + 1))
+        return _exp2_table(self.out_frac + self.guard_bits, self.lut_bits)
 
     @cached_property
     def slope(self) -> tuple[int, ...]:
@@ -192,7 +203,7 @@ class Exp2Neg:
 
     @property
     def slope_width(self) -> int:
-        return max(max(-s for s in self.slope).bit_length() + 1, 1)
+        return (-min(self.slope) - 1).bit_length() + 1  # two's complement width of min SLOPE
 
     def constants(self) -> dict[str, Any]:
         return {**asdict(self), "rem_bits": self.rem_bits, "slope_width": self.slope_width,
@@ -232,7 +243,7 @@ def sqrt_round(x: Any, in_frac: int, out_frac: int) -> Any:
     if shift < 0:
         raise ValueError(f"sqrt_round needs 2 out_frac - in_frac >= 0, got {shift}")
     v, shape, scalar = _ints(x, 0, None, "sqrt_round input")
-    if v.dtype != object and (v.size == 0 or int(v.max()) <= _I64_MAX >> shift):
+    if v.dtype != object and shift < 63 and (v.size == 0 or int(v.max()) <= _I64_MAX >> shift):
         big = v << shift
         r = _isqrt64(big)
         out = r + (big - r * r > r)
@@ -290,16 +301,36 @@ def _isqrt64(v: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
     return s + (su * su <= u)
 
 
-def _iroot_pow2(e: int, levels: int) -> int:
-    """floor(2^(e / 2^levels)) by `levels` nested isqrt of 2^e (e >= 0)."""
-    v = 1 << e
-    for _ in range(levels):
-        v = math.isqrt(v)
-    return v
+@functools.lru_cache(maxsize=64)
+def _exp2_table(big: int, lut: int) -> tuple[int, ...]:
+    """round_half_up(2^(big - k/2^L)), k = 0 .. 2^L, exact.
+
+    a_k = floor(a_(k-1) c / 2^P) with c = floor(2^(P - 1/2^L)) (L nested isqrt: floor(sqrt(
+    floor(v))) = floor(sqrt(v))) undershoots 2^(P - k/2^L) by less than 2k; where that could
+    change the rounding, the candidate b is checked exactly: (2b-1)^2^L <= 2^e < (2b+1)^2^L.
+    """
+    seg, prec = 1 << lut, big + 64
+    one, margin = 1 << prec, (2 * seg + 2) << big
+    c = 1 << (prec * seg - 1)
+    for _ in range(lut):
+        c = math.isqrt(c)
+    a, out = one, []
+    for k in range(seg + 1):
+        t = (a << big) + (one >> 1)
+        b, frac = t >> prec, t & (one - 1)
+        if frac < margin or frac > one - margin:
+            e = seg * (big + 1) - k  # 2^e = (2 * 2^(big - k/seg))^seg
+            while b > 0 and (2 * b - 1) ** seg > 1 << e:
+                b -= 1
+            while (2 * b + 1) ** seg <= 1 << e:
+                b += 1
+        out.append(b)
+        a = (a * c) >> prec
+    return tuple(out)
 
 
 def _atan_inv(q: int, prec: int) -> int:
-    """floor-ish(atan(1/q) 2^prec) by the alternating series; error < (terms) units."""
+    """atan(1/q) 2^prec by the alternating series, within (number of terms) units."""
     power, total, k, q2 = (1 << prec) // q, 0, 0, q * q
     while power:
         total += power // (2 * k + 1) if k % 2 == 0 else -(power // (2 * k + 1))

@@ -99,7 +99,7 @@ def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str) -> Scenari
     z[1:] = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) + noise)
     return Scenario("bot", cfg.dt, np.arange(steps + 1) * cfg.dt, {"observer": observer},
                     {"z": z}, truth, np.array(p["x0"], dtype=float),
-                    {"generator": name, "seed": seed, "config": cfg.name})
+                    {"generator": name, "seed": int(seed), "config": cfg.name})
 
 
 def bot_fixed_observer(cfg: Any, steps: int, seed: int) -> Scenario:
@@ -154,7 +154,7 @@ def uav_flight(cfg: Any, steps: int, seed: int) -> Scenario:
               "accel": noisy(accel, p["sigma_a"])}
     v_gps = noisy(truth[1:, 4:], p["sigma_v"])
     return Scenario("uav", cfg.dt, np.arange(steps + 1) * cfg.dt, inputs, {"v_gps": v_gps},
-                    truth, mu0, {"generator": "uav_flight", "seed": seed, "config": cfg.name,
+                    truth, mu0, {"generator": "uav_flight", "seed": int(seed), "config": cfg.name,
                                  "profile": flight.PHASES})
 
 
@@ -225,6 +225,8 @@ def read_csv(path: str | Path) -> Scenario:
                 v = float(f)
             except ValueError:
                 v = math.nan
+            if not f:
+                raise ValueError(f"{where}, column '{c}': empty, a number is required here")
             if not math.isfinite(v):
                 raise ValueError(f"{where}, column '{c}': {f!r} is not a finite number")
             if c == "k" and v != r:
@@ -236,7 +238,8 @@ def read_csv(path: str | Path) -> Scenario:
     cols = dict(zip(names, np.array(rows).T, strict=True))
     t = cols["t"]
     dt = float(info.get("dt", t[1] - t[0]))
-    bad = np.flatnonzero(np.abs(t - (t[0] + np.arange(len(t)) * dt)) > 1e-9 * np.maximum(1, t))
+    off = np.abs(t - (t[0] + np.arange(len(t)) * dt))
+    bad = np.flatnonzero(off > 1e-9 * np.maximum(1, np.abs(t)))
     if not dt > 0 or len(bad):
         r = int(bad[0]) if len(bad) else 1
         raise ValueError(f"{path}: row {r} (line {header_at + 2 + r}), column 't': {t[r]!r} is "
