@@ -125,8 +125,8 @@ def cmd_model_run(args: argparse.Namespace) -> int:
     ratio, noise = mc.ratio_and_noise()
     print(f"{cfg.name} {mc.scenario}: {mc.runs} runs x {mc.steps} steps, N = {mc.particles}: "
           f"RMSE {summary['rmse_unit']} float {mc.rmse('float'):.5g}, fixed "
-          f"{mc.rmse('fixed'):.5g}, ratio {ratio:.4f} +- {noise:.4f}; flags {mc.flag_counts}"
-          f" -> {out}")
+          f"{mc.rmse('fixed'):.5g}, ratio {ratio:.4f} +- {noise:.4f} (float with numpy's "
+          f"draws: {mc.rmse('float_numpy'):.5g}); flags {mc.flag_counts} -> {out}")
     return 0
 
 

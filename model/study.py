@@ -49,8 +49,9 @@ class MonteCarlo:
     seed: int
     word: int | None
     scenario: str
-    sq_err: dict[str, list[np.ndarray]] = field(default_factory=lambda: {"float": [],
-                                                                          "fixed": []})
+    # float: fed the GRNG model's draws; float_numpy: numpy's own generator (independent draws)
+    sq_err: dict[str, list[np.ndarray]] = field(
+        default_factory=lambda: {"float": [], "fixed": [], "float_numpy": []})
     first: dict[str, Any] = field(default_factory=dict)
     flag_counts: dict[str, int] = field(default_factory=dict)
 
@@ -75,7 +76,8 @@ class MonteCarlo:
             "app": self.app, "scenario": self.scenario, "steps": self.steps,
             "particles": self.particles, "runs": self.runs, "seed": self.seed,
             "word": self.word, "rmse_unit": unit,
-            "rmse": {"float": self.rmse("float"), "fixed": self.rmse("fixed")},
+            "rmse": {"float": self.rmse("float"), "fixed": self.rmse("fixed"),
+                     "float_numpy_draws": self.rmse("float_numpy")},
             "ratio_fixed_float": ratio, "ratio_std_error": noise,
             "flag_steps": self.flag_counts, "per_step": self.first,
         }
@@ -105,8 +107,11 @@ def monte_carlo(cfg: Config, runs: int = 10, steps: int | None = None,
         fixed = run(gpf, sc, seed=seed + r)
         real_draws = gpf.dp.noise.to_real(fixed.draws)
         floating = flt.run(sc, draws=real_draws)
+        independent = flt.run(sc, rng=np.random.default_rng([seed, r]))
         err_fixed = error_per_step(cfg.app, fixed.mu, sc.truth)
         err_float = error_per_step(cfg.app, floating.mu, sc.truth)
+        out.sq_err["float_numpy"].append(
+            error_per_step(cfg.app, independent.mu, sc.truth)[1:] ** 2)
         out.sq_err["fixed"].append(err_fixed[1:] ** 2)
         out.sq_err["float"].append(err_float[1:] ** 2)
         for bits in fixed.flags[1:]:

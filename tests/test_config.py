@@ -32,7 +32,8 @@ def test_seed002_word_lengths() -> None:
     assert [uav.formats[k].width for k in ("quaternion", "velocity", "weight")] == [24] * 3
     assert uav.particles == 2048
     assert uav.app_params == {"sigma_omega_deg": 0.008, "sigma_a": 0.07, "sigma_v": 0.02,
-                              "covariance": "block"}
+                              "covariance": "block",
+                              "sigma0_diag": [3.0e-4] * 4 + [9.0e-4] * 3}
     bot = load_config("configs/bot.toml")
     assert bot.app_params["x0"] == [1.0, 0.3, 3.0, 0.3]
     assert bot.dt == 1.0 and bot.steps == 50
