@@ -36,12 +36,15 @@ class Const:
 
     @classmethod
     def of(cls, value: float, width: int = CONST_WIDTH) -> Const:
-        int_bits = max(0, math.floor(math.log2(abs(value))) + 1) if value else 0
+        if value == 0:
+            return cls(value, 0, width - 1)
+        # |value| < 2^int_bits (int_bits < 0 for small constants: more fraction bits)
+        int_bits = math.floor(math.log2(abs(value))) + 1
         frac = width - 1 - int_bits
-        raw = math.floor(value * 2**frac + 0.5)
-        if not -(1 << (width - 1)) <= raw < 1 << (width - 1):  # rounding up to a power of 2
+        raw = math.floor(value * 2.0**frac + 0.5)
+        if not -(1 << (width - 1)) <= raw < 1 << (width - 1):  # rounded up to a power of 2
             frac -= 1
-            raw = math.floor(value * 2**frac + 0.5)
+            raw = math.floor(value * 2.0**frac + 0.5)
         return cls(value, raw, frac)
 
     @property
@@ -148,3 +151,24 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
 
 def _exp2(t: Format, weight: Format) -> Exp2Neg:
     return Exp2Neg.for_formats(in_width=t.width, in_frac=t.frac_bits, out_frac=weight.frac_bits)
+
+
+def constants(dp: Datapath) -> dict:
+    """Everything the RTL of the filter blocks is generated from (JSON-able, for the manifest)."""
+    out = {
+        "app": dp.app,
+        "state": [str(f) for f in dp.x],
+        "chol": [str(f) for f in dp.chol],
+        "noise": str(dp.noise), "weight": str(dp.weight), "u": str(dp.u), "t": str(dp.t),
+        "angle_frac": dp.angle_frac,
+        "consts": {k: {"value": c.value, "raw": c.raw, "frac": c.frac}
+                   for k, c in sorted(dp.consts.items())},
+        "chol_floor_lsb": CHOL_FLOOR_LSB, "chol_floor_rel_bits": CHOL_FLOOR_REL_BITS,
+        "inv_guard": INV_GUARD,
+        "exp2": dp.exp2.constants(),
+    }
+    if dp.cordic is not None:
+        out["cordic"] = dp.cordic.constants()
+    if dp.gyro is not None:
+        out.update(gyro=str(dp.gyro), accel=str(dp.accel), rot=str(dp.rot), h_frac=dp.h_frac)
+    return out

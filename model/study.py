@@ -87,6 +87,10 @@ def monte_carlo(cfg: Config, runs: int = 10, steps: int | None = None,
                 particles: int | None = None, seed: int = 1, word: int | None = None,
                 scenario: str | scenarios.Scenario | None = None,
                 progress: bool = True) -> MonteCarlo:
+    if isinstance(scenario, scenarios.Scenario):
+        if steps is not None and steps != scenario.steps:
+            raise ValueError(f"--steps {steps}: the scenario file has {scenario.steps} steps")
+        steps = scenario.steps
     steps = steps or cfg.steps
     gpf = FixedGPF(cfg, particles=particles, word=word)
     flt = FloatGPF(cfg, gpf.particles)

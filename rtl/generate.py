@@ -17,6 +17,8 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
+from gpf.model.formats import constants as datapath_constants
+from gpf.model.formats import datapath
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 
@@ -134,6 +136,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
         "lanes": cfg.lanes,
         "particles": cfg.particles,
         "formats": {name: str(fmt) for name, fmt in cfg.formats.items()},
+        # the filter datapath's derived formats, constants and primitive tables (model/)
+        "datapath": datapath_constants(datapath(cfg)),
         "modules": {},
     }
     for name in names:
