@@ -28,8 +28,11 @@ def test_shipped_configs_load(path: Path) -> None:
 
 def test_seed002_word_lengths() -> None:
     uav = load_config("configs/uav.toml")
-    # seed 002's 24-bit words, split by our word-length study (README)
-    assert [uav.formats[k].width for k in ("quaternion", "velocity", "weight")] == [24] * 3
+    # 18-bit words from the word-length study (README); seed 002's own in uav_seed002.toml
+    assert [uav.formats[k].width for k in ("quaternion", "velocity", "weight")] == [18] * 3
+    seed002 = load_config("configs/uav_seed002.toml")
+    assert [str(seed002.formats[k]) for k in ("quaternion", "velocity", "weight")] == [
+        "s3.20", "s10.13", "u1.23"]
     assert uav.particles == 2048
     assert uav.app_params == {"sigma_omega_deg": 0.008, "sigma_a": 0.07, "sigma_v": 0.02,
                               "covariance": "block",

@@ -19,6 +19,7 @@ from gpf.model.scenarios import bot_fixed_observer, uav_flight
 
 BOT = load_config("configs/bot.toml")
 UAV = load_config("configs/uav.toml")
+WIDE = 24  # the exactness tests below size their raw inputs for 24-bit words
 
 
 def frac_round(value: Fraction) -> int:
@@ -36,7 +37,7 @@ def quantise_sigma(dp, sigma: np.ndarray, pairs) -> dict:
 
 
 def test_sample_cond_is_exact() -> None:
-    dp = datapath(BOT)
+    dp = datapath(BOT, WIDE)
     rng = np.random.default_rng(1)
     mu = rng.integers(-(1 << 18), 1 << 18, size=4)
     chol = np.tril(rng.integers(-(1 << 18), 1 << 18, size=(4, 4)))
@@ -61,7 +62,7 @@ def test_sample_cond_saturates_with_flag() -> None:
 
 
 def test_propagate_bot_is_exact() -> None:
-    dp = datapath(BOT)
+    dp = datapath(BOT, WIDE)
     rng = np.random.default_rng(2)
     x = rng.integers(-(1 << 20), 1 << 20, size=(50, 4))
     e = rng.integers(-(1 << 16), 1 << 16, size=(50, 2))
@@ -83,7 +84,7 @@ def test_propagate_bot_is_exact() -> None:
 
 
 def test_weight_bot_close_to_float() -> None:
-    gpf = FixedGPF(BOT, particles=256)
+    gpf = FixedGPF(BOT, particles=256, word=WIDE)
     dp = gpf.dp
     rng = np.random.default_rng(3)
     xr = np.column_stack([rng.uniform(1, 3, 256), np.zeros(256), rng.uniform(2, 4, 256),
@@ -131,7 +132,7 @@ def test_cholesky_against_numpy(seed: int) -> None:
 
 
 def test_cholesky_regularises_singular_with_flag() -> None:
-    dp = datapath(UAV)
+    dp = datapath(UAV, WIDE)
     pairs = blocks.cov_pairs(dp, "full")
     v = np.random.default_rng(9).normal(size=(7, 3)) * 0.05
     sigma = v @ v.T                                              # rank 3: not positive definite
