@@ -78,6 +78,25 @@ def grng_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def exp_context(cfg: Config) -> dict[str, Any]:
+    dp = datapath(cfg)
+    e = dp.exp2
+    if e.in_frac < e.lut_bits:
+        raise ValueError(f"exp: {e} has fewer fraction bits than LUT bits (not generated)")
+    m_width = e.out_frac + e.guard_bits + 1
+    rom_width = e.slope_width + m_width
+    rom = [f"{(_twos(slope, e.slope_width) << m_width) | base:0{(rom_width + 3) // 4}X}"
+           for base, slope in zip(e.base, e.slope, strict=False)]
+    return {
+        "lanes": cfg.lanes, "latency": 4,
+        "in_width": e.in_width, "in_frac": e.in_frac, "out_width": e.out_frac + 1,
+        "t_fmt": str(dp.t), "w_fmt": str(dp.weight),
+        "lut_bits": e.lut_bits, "rem_bits": e.rem_bits, "guard_bits": e.guard_bits,
+        "m_width": m_width, "slope_width": e.slope_width,
+        "k_width": max(1, e.lut_bits), "rom_width": rom_width, "rom": rom,
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -92,6 +111,7 @@ def _twos(value: int, width: int) -> int:
 
 MODULES: dict[str, Module] = {
     "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "grng"), grng_context),
+    "exp": Module("exp", ("exp_lane", "exp"), exp_context),
 }
 
 

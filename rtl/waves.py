@@ -12,7 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gpf.config import Config
-from gpf.rtl.generate import grng_context
+from gpf.model.formats import datapath
+from gpf.rtl.generate import exp_context, grng_context
 from gpf.rtl.gtkw import Group, Trace, write_gtkw
 from gpf.tb.harness import CLOCK_NS
 from gpf.toolchain import ToolchainError
@@ -58,7 +59,33 @@ def grng_view(cfg: Config, sim: str) -> list[Group]:
     return groups
 
 
-VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view}
+def exp_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = exp_context(cfg)
+    iw, ow = k["in_width"], k["out_width"]
+    lane = "exp.g_lane[0].u_lane"
+    return [
+        Group("clock and reset", [_bit("exp.clk"), _bit("exp.rst")]),
+        Group(f"input t ({dp.t})", [_bit("exp.s_axis_tvalid"), _bit("exp.s_axis_tready"),
+                                    _bit("exp.s_axis_tlast")] + [
+            Trace("exp.s_axis_tdata", iw * (i + 1) - 1, iw * i, label=f"lane{i} t",
+                  frac_bits=dp.t.frac_bits) for i in range(cfg.lanes)]),
+        Group(f"output w ({dp.weight})", [_bit("exp.m_axis_tvalid"), _bit("exp.m_axis_tready"),
+                                          _bit("exp.m_axis_tlast")] + [
+            Trace("exp.m_axis_tdata", ow * (i + 1) - 1, ow * i, label=f"lane{i} w",
+                  frac_bits=dp.weight.frac_bits) for i in range(cfg.lanes)]),
+        Group("lane 0 pipeline", [
+            Trace(f"{lane}.n1_q", iw - k["in_frac"] - 1, 0, label="n (integer part)",
+                  frac_bits=0),
+            Trace(f"{lane}.k1_q", k["k_width"] - 1, 0, label="segment k", frac_bits=0),
+            Trace(f"{lane}.m_q", k["m_width"] - 1, 0, label="m = 2^-f",
+                  frac_bits=k["m_width"] - 2),
+            Trace(f"{lane}.w_q", ow - 1, 0, label="w", frac_bits=dp.weight.frac_bits),
+        ]),
+    ]
+
+
+VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

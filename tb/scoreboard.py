@@ -39,6 +39,22 @@ def unpack(words: list[int], fields: list[Field], lanes: int) -> dict[str, np.nd
     return out
 
 
+def pack(fields: list[Field], values: dict[str, np.ndarray]) -> list[int]:
+    """Stream words from raw field values (beats, lanes): the inverse of unpack()."""
+    lane_w = sum(f.fmt.width for f in fields)
+    beats, lanes = np.asarray(values[fields[0].name]).shape
+    words = []
+    for beat in range(beats):
+        word = 0
+        for lane in range(lanes):
+            shift = lane * lane_w
+            for f in fields:
+                word |= (int(values[f.name][beat, lane]) & ((1 << f.fmt.width) - 1)) << shift
+                shift += f.fmt.width
+        words.append(word)
+    return words
+
+
 @dataclass
 class Scoreboard:
     block: str

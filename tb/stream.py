@@ -68,3 +68,33 @@ class StreamMonitor:
 
     def stop(self) -> None:
         self._task.cancel()
+
+
+class StreamDriver:
+    """Drives an AXI4-Stream slave port (`<name>_tvalid/tready/tdata/tlast`) with beats, idle
+    for a random clock before a beat with probability `idle`; holds each beat until taken."""
+
+    def __init__(self, clk: SimHandleBase, prefix: SimHandleBase, name: str, idle: float,
+                 rng: random.Random):
+        self.clk, self.idle, self.rng = clk, idle, rng
+        self.tvalid = getattr(prefix, f"{name}_tvalid")
+        self.tready = getattr(prefix, f"{name}_tready")
+        self.tdata = getattr(prefix, f"{name}_tdata")
+        self.tlast = getattr(prefix, f"{name}_tlast")
+        self.tvalid.value = 0
+
+    async def send(self, beats: list[tuple[int, bool]]) -> None:
+        for data, last in beats:
+            while self.rng.random() < self.idle:
+                self.tvalid.value = 0
+                await RisingEdge(self.clk)
+            self.tvalid.value = 1
+            self.tdata.value = data
+            self.tlast.value = int(last)
+            while True:
+                await ReadOnly()
+                taken = self.tready.value == 1
+                await RisingEdge(self.clk)
+                if taken:
+                    break
+        self.tvalid.value = 0

@@ -1,7 +1,7 @@
-"""The GRNG testbench on both simulators, two configs, one and two lanes; waves; mutants.
+"""Every block's testbench on both simulators, two configs, one and two lanes; waves; mutants.
 
-Each run generates the RTL, builds it in build/<config>/<sim>/grng and runs every cocotb test
-of tb/grng/test_grng.py (bit-exact scoreboard, stalls, reseed, latency, corrupted model).
+Each run generates the RTL, builds it in build/<config>/<sim>/<module> and runs every cocotb
+test of tb/<module>/test_<module>.py (bit-exact scoreboard, stalls, latency, corrupted model).
 """
 
 from __future__ import annotations
@@ -29,13 +29,17 @@ def waves_possible(sim: str) -> bool:
     return sim == "icarus" or LZ4_HEADER.exists()
 
 
+MODULES = ["grng", "exp"]
+
+
 @pytest.mark.parametrize("sim", SIMS)
 @pytest.mark.parametrize("config,lanes", [("bot", 1), ("bot", 2), ("odd", 1), ("odd", 2)])
-def test_grng(sim: str, config: str, lanes: int) -> None:
+@pytest.mark.parametrize("module", MODULES)
+def test_block(module: str, sim: str, config: str, lanes: int) -> None:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
     waves = config == "bot" and lanes == 1 and waves_possible(sim)
-    result = run_sim(cfg, "grng", sim, waves=waves, seed=1000 + lanes,
-                     log_file=Path("build") / cfg.name / f"grng-{sim}.log")
+    result = run_sim(cfg, module, sim, waves=waves, seed=1000 + lanes,
+                     log_file=Path("build") / cfg.name / f"{module}-{sim}.log")
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
     assert result.tests >= 6
     if waves:
@@ -43,30 +47,37 @@ def test_grng(sim: str, config: str, lanes: int) -> None:
         assert result.waves.with_suffix(".gtkw").exists()
 
 
-# (template, text, replacement): one operator or constant changed in each
+# (module, template, text, replacement): one operator or constant changed in each
 MUTANTS = {
-    "lfsr-xor": ("grng_lfsr258.sv.j2", "uniform_d = uniform_d ^ step[c];",
+    "grng-lfsr-xor": ("grng", "grng_lfsr258.sv.j2", "uniform_d = uniform_d ^ step[c];",
                  "uniform_d = uniform_d | step[c];"),
-    "horner-add": ("grng_icdf.sv.j2", ">>> XW) + {{ sext('c0_3_q'",
+    "grng-horner-add": ("grng", "grng_icdf.sv.j2", ">>> XW) + {{ sext('c0_3_q'",
                    ">>> XW) - {{ sext('c0_3_q'"),
-    "rounding": ("grng_icdf.sv.j2", "(C2W+XW+1)'(1 <<< (XW-1))", "(C2W+XW+1)'(1 <<< (XW-2))"),
-    "backpressure": ("grng.sv.j2", "assign advance = !m_axis_tvalid || m_axis_tready;",
+    "grng-rounding": ("grng", "grng_icdf.sv.j2", "(C2W+XW+1)'(1 <<< (XW-1))",
+                      "(C2W+XW+1)'(1 <<< (XW-2))"),
+    "grng-backpressure": ("grng", "grng.sv.j2", "assign advance = !m_axis_tvalid || m_axis_tready;",
                      "assign advance = !m_axis_tvalid | !m_axis_tready;"),
+    "exp-interp-round": ("exp", "exp_lane.sv.j2", "(SW+RB+1)'(1 <<< (RB-1))",
+                         "(SW+RB+1)'(1 <<< RB)"),
+    "exp-underflow": ("exp", "exp_lane.sv.j2", "if (s > (NW+1)'($unsigned(MW))) begin",
+                      "if (s >= (NW+1)'($unsigned(MW))) begin"),
+    "exp-last": ("exp", "exp.sv.j2", "assign m_axis_tlast = last_q[LATENCY-1];",
+                 "assign m_axis_tlast = last_q[LATENCY-2];"),
 }
 
 
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
 @pytest.mark.parametrize("mutant", list(MUTANTS))
 def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
-    template, old, new = MUTANTS[mutant]
+    module, template, old, new = MUTANTS[mutant]
     templates = tmp_path / "templates"
     shutil.copytree(TEMPLATE_DIR, templates)
     path = templates / template
     text = path.read_text()
     assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
     path.write_text(text.replace(old, new))
-    result = run_sim(load_config("configs/bot.toml"), "grng", "icarus", seed=1,
+    result = run_sim(load_config("configs/bot.toml"), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
                      log_file=tmp_path / "sim.log")
     assert result.tests > 0
-    assert result.failed > 0, f"mutant {mutant} survived the GRNG testbench"
+    assert result.failed > 0, f"mutant {mutant} survived the {module} testbench"
