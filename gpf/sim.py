@@ -56,8 +56,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "little")
     config_dir = (build_root / cfg.name).resolve()
-    generated = generate(cfg, config_dir / "rtl", [module],
-                         template_dir=template_dir or TEMPLATE_DIR)
+    # every module, so the manifest is whole whichever module runs (runs share the folder)
+    generated = generate(cfg, config_dir / "rtl", template_dir=template_dir or TEMPLATE_DIR)
     build_dir = config_dir / sim / module
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,8 +18,10 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
+from gpf.model.fixed import Format
+from gpf.model.formats import INV_GUARD, datapath
 from gpf.model.formats import constants as datapath_constants
-from gpf.model.formats import datapath
+from gpf.model.primitives import Cordic, recip
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 
@@ -97,6 +100,87 @@ def exp_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def cordic_model(cfg: Config) -> Cordic:
+    """The CORDIC of `cordic_atan2`: the datapath's (bot), else one for the state word, so that
+    every config builds and tests the block (uav's filter has no atan2)."""
+    dp = datapath(cfg)
+    return dp.cordic if dp.cordic is not None else Cordic.for_widths(dp.word, dp.word)
+
+
+def cordic_atan2_context(cfg: Config) -> dict[str, Any]:
+    dp = datapath(cfg)
+    c = cordic_model(cfg)
+    if c.in_width != dp.word:
+        raise ValueError(f"cordic_atan2: {c} does not take {dp.word}-bit state words")
+    if c.iterations < 2:  # one iteration would leave the pre-rotated X unused
+        raise ValueError(f"cordic_atan2: {c} has fewer than 2 iterations (not generated)")
+    digits = (c.z_width + 3) // 4
+    quarter = 1 << (c.z_width - 2)
+    return {
+        # stage 1 pre-rotation, one stage per iteration, the last one rounds
+        "lanes": cfg.lanes, "latency": c.iterations + 2,
+        "in_width": c.in_width, "in_fmt": str(dp.x[0]), "out_width": c.angle_frac,
+        "iterations": c.iterations, "guard_bits": c.guard_bits,
+        "xy_width": c.xy_width, "z_width": c.z_width,
+        "quarter": f"{quarter:0{digits}X}",
+        "minus_quarter": f"{_twos(-quarter, c.z_width):0{digits}X}",
+        "angles": [f"{a:0{digits}X}" for a in c.angles],
+    }
+
+
+def sqrt_context(cfg: Config) -> dict[str, Any]:
+    """round(sqrt(d)) of a Cholesky pivot d (fraction 2F) into L's format (fraction F).
+
+    F and W are L_00's: dp.chol[0]. d is unsigned 2W bits; L unsigned W - 1 bits (L_jj >= 0,
+    the same maximum as the signed L format). The width does not suffice for every d: any
+    d >= (2^(W-1) - 1/2)^2 LSB^2 would round to 2^(W-1) or more, so L saturates to all ones
+    and `sat` (a second output field, u1.0) says so, as the model's saturate() into dp.chol[j].
+    The root runs over d < 2^(2W-2) (the top two bits of d saturate): W digit stages (the last
+    is the rounding digit) and one rounding stage.
+    """
+    dp = datapath(cfg)
+    chol = dp.chol[0]
+    f, w = chol.frac_bits, chol.width
+    if dp.cov_frac(0, 0) != 2 * f:
+        raise ValueError(f"sqrt: Sigma_00 has fraction {dp.cov_frac(0, 0)}, not 2 x {f}")
+    if w < 4:
+        raise ValueError(f"sqrt: L format {chol} is too narrow (need >= 4 bits)")
+    d_fmt = Format(False, 2 * w - 2 * f, 2 * f)
+    l_fmt = Format(False, w - 1 - f, f)
+    return {
+        "lanes": cfg.lanes, "latency": w + 1, "digits": w,
+        "in_width": d_fmt.width, "out_width": l_fmt.width, "lane_width": l_fmt.width + 1,
+        "d_fmt": str(d_fmt), "l_fmt": str(l_fmt), "sat_fmt": "u1.0",
+    }
+
+
+def recip_context(cfg: Config) -> dict[str, Any]:
+    """round(2^(2F+G) / L) = div_round(1, L, 2F + G): 1/L_jj with F + G fraction bits.
+
+    L is the sqrt block's output format (unsigned W - 1 bits, fraction F, from dp.chol[0]),
+    G = INV_GUARD. The result is largest at the smallest valid input, L = 1: 2^(2F+G), so
+    2F + G + 1 bits. L = 0 is not a valid input; its output is defined as all ones. A long
+    divider of 2^(2F+G+1) by L: 2F + G + 2 quotient stages (the last is the rounding bit) and
+    one rounding stage.
+    """
+    dp = datapath(cfg)
+    chol = dp.chol[0]
+    f = chol.frac_bits
+    shift = 2 * f + INV_GUARD
+    l_fmt = Format(False, chol.width - 1 - f, f)
+    out_width = int(recip(1, shift)).bit_length()   # the largest result, at L = 1
+    if any(int(recip(v, shift)) >> out_width for v in (1, 2, 3, l_fmt.max_raw)):
+        raise AssertionError("recip: result wider than derived")  # recip is non-increasing
+    inv_fmt = Format(False, out_width - (f + INV_GUARD), f + INV_GUARD)
+    quotient_bits = out_width + 1
+    return {
+        "lanes": cfg.lanes, "latency": quotient_bits + 1, "quotient_bits": quotient_bits,
+        "shift": shift, "inv_guard": INV_GUARD,
+        "in_width": l_fmt.width, "out_width": inv_fmt.width,
+        "l_fmt": str(l_fmt), "inv_fmt": str(inv_fmt), "zero_result": (1 << out_width) - 1,
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -112,6 +196,10 @@ def _twos(value: int, width: int) -> int:
 MODULES: dict[str, Module] = {
     "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "grng"), grng_context),
     "exp": Module("exp", ("exp_lane", "exp"), exp_context),
+    "cordic_atan2": Module("cordic_atan2", ("cordic_atan2_lane", "cordic_atan2"),
+                           cordic_atan2_context),
+    "sqrt": Module("sqrt", ("sqrt_lane", "sqrt"), sqrt_context),
+    "recip": Module("recip", ("recip_lane", "recip"), recip_context),
 }
 
 
@@ -183,5 +271,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     for fname, text in texts.items():
         path = out_dir / fname
         if not path.exists() or path.read_text() != text:
-            path.write_text(text)
+            # atomic: simulations of other modules may be reading this folder right now
+            tmp = path.with_name(f".{fname}.{os.getpid()}.tmp")
+            tmp.write_text(text)
+            os.replace(tmp, path)
     return Generated(out_dir, files, manifest)

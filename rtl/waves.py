@@ -12,8 +12,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gpf.config import Config
+from gpf.model.fixed import Format
 from gpf.model.formats import datapath
-from gpf.rtl.generate import exp_context, grng_context
+from gpf.rtl.generate import (
+    cordic_atan2_context,
+    exp_context,
+    grng_context,
+    recip_context,
+    sqrt_context,
+)
 from gpf.rtl.gtkw import Group, Trace, write_gtkw
 from gpf.tb.harness import CLOCK_NS
 from gpf.toolchain import ToolchainError
@@ -85,7 +92,106 @@ def exp_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def cordic_atan2_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = cordic_atan2_context(cfg)
+    iw, aw, g, n = k["in_width"], k["out_width"], k["guard_bits"], k["iterations"]
+    xyw, zw, frac = k["xy_width"], k["z_width"], dp.x[0].frac_bits
+    top, lane = "cordic_atan2", "cordic_atan2.g_lane[0].u_lane"
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        Group(f"input x, y ({dp.x[0]})", [_bit(f"{top}.s_axis_tvalid"),
+                                          _bit(f"{top}.s_axis_tready"),
+                                          _bit(f"{top}.s_axis_tlast")] + [
+            Trace(f"{top}.s_axis_tdata", 2 * iw * i + off + iw - 1, 2 * iw * i + off,
+                  label=f"lane{i} {name}", signed=True, frac_bits=frac)
+            for i in range(cfg.lanes) for name, off in (("x", 0), ("y", iw))]),
+        Group("output angle (turns)", [_bit(f"{top}.m_axis_tvalid"),
+                                       _bit(f"{top}.m_axis_tready"),
+                                       _bit(f"{top}.m_axis_tlast")] + [
+            Trace(f"{top}.m_axis_tdata", aw * (i + 1) - 1, aw * i, label=f"lane{i} angle",
+                  signed=True, frac_bits=aw) for i in range(cfg.lanes)]),
+        Group("lane 0 pipeline", [
+            Trace(f"{lane}.zero_q", 0, 0, label="x = y = 0, stage 1"),
+            Trace(f"{lane}.x0_q", xyw - 1, 0, label="X, pre-rotated", signed=True,
+                  frac_bits=frac + g),
+            Trace(f"{lane}.y0_q", xyw - 1, 0, label="Y, pre-rotated", signed=True,
+                  frac_bits=frac + g),
+            Trace(f"{lane}.z0_q", zw - 1, 0, label="z, pre-rotation (turns)", signed=True,
+                  frac_bits=zw),
+            Trace(f"{lane}.z{n}_q", zw - 1, 0, label=f"z, iteration {n - 1} (turns)",
+                  signed=True, frac_bits=zw),
+            Trace(f"{lane}.zero_q", n, n, label=f"x = y = 0, stage {n + 1}"),
+            Trace(f"{lane}.angle_q", aw - 1, 0, label="angle (turns)", signed=True,
+                  frac_bits=aw),
+        ]),
+    ]
+
+
+def _stream(top: str, label: str, side: str, width: int, lanes: int,
+            fields: list[tuple[str, int, int, int | None]]) -> Group:
+    """One AXI4-Stream side: handshake bits and each lane's fields (name, offset, width, frac)."""
+    return Group(label, [_bit(f"{top}.{side}_tvalid"), _bit(f"{top}.{side}_tready"),
+                         _bit(f"{top}.{side}_tlast")] + [
+        Trace(f"{top}.{side}_tdata", width * i + off + w - 1, width * i + off,
+              label=f"lane{i} {name}", frac_bits=frac)
+        for i in range(lanes) for name, off, w, frac in fields])
+
+
+def sqrt_view(cfg: Config, sim: str) -> list[Group]:
+    k = sqrt_context(cfg)
+    d_fmt, l_fmt = Format.parse(k["d_fmt"]), Format.parse(k["l_fmt"])
+    iw, ow, n = k["in_width"], k["out_width"], k["digits"]
+    lane = "sqrt.g_lane[0].u_lane"
+    mid = n // 2
+    return [
+        Group("clock and reset", [_bit("sqrt.clk"), _bit("sqrt.rst")]),
+        _stream("sqrt", f"input d ({d_fmt})", "s_axis", iw, cfg.lanes,
+                [("d", 0, iw, d_fmt.frac_bits)]),
+        _stream("sqrt", f"output L ({l_fmt}), sat", "m_axis", k["lane_width"], cfg.lanes,
+                [("L", 0, ow, l_fmt.frac_bits), ("sat", ow, 1, None)]),
+        Group("lane 0 digit recurrence", [
+            Trace(f"{lane}.q1_q", 0, 0, label="root, stage 1"),
+            Trace(f"{lane}.q{mid}_q", mid - 1, 0, label=f"root, stage {mid}", frac_bits=0),
+            Trace(f"{lane}.rem{mid}_q", mid, 0, label=f"remainder, stage {mid}", frac_bits=0),
+            Trace(f"{lane}.root_q", n - 2, 0, label="floor(sqrt(d))",
+                  frac_bits=l_fmt.frac_bits),
+            _bit(f"{lane}.rb_q", "rounding bit"),
+            Trace(f"{lane}.l_q", ow - 1, 0, label="L", frac_bits=l_fmt.frac_bits),
+            _bit(f"{lane}.sat_q", "sat"),
+        ]),
+    ]
+
+
+def recip_view(cfg: Config, sim: str) -> list[Group]:
+    k = recip_context(cfg)
+    l_fmt, inv_fmt = Format.parse(k["l_fmt"]), Format.parse(k["inv_fmt"])
+    iw, ow, s = k["in_width"], k["out_width"], k["quotient_bits"]
+    lane = "recip.g_lane[0].u_lane"
+    mid = s // 2
+    return [
+        Group("clock and reset", [_bit("recip.clk"), _bit("recip.rst")]),
+        _stream("recip", f"input L ({l_fmt})", "s_axis", iw, cfg.lanes,
+                [("L", 0, iw, l_fmt.frac_bits)]),
+        _stream("recip", f"output 1/L ({inv_fmt})", "m_axis", ow, cfg.lanes,
+                [("inv", 0, ow, inv_fmt.frac_bits)]),
+        Group("lane 0 long division", [
+            Trace(f"{lane}.l{mid}_q", iw - 1, 0, label=f"divisor, stage {mid}",
+                  frac_bits=l_fmt.frac_bits),
+            Trace(f"{lane}.q{mid}_q", mid - 1, 0, label=f"quotient, stage {mid}", frac_bits=0),
+            Trace(f"{lane}.rem{mid}_q", min(mid, iw) - 1, 0, label=f"remainder, stage {mid}",
+                  frac_bits=0),
+            Trace(f"{lane}.quo_q", ow - 1, 0, label="floor(2^shift / L)",
+                  frac_bits=inv_fmt.frac_bits),
+            _bit(f"{lane}.rb_q", "rounding bit"),
+            Trace(f"{lane}.inv_q", ow - 1, 0, label="1/L", frac_bits=inv_fmt.frac_bits),
+        ]),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
+VIEWS.update(sqrt=sqrt_view, recip=recip_view)
+VIEWS.update(cordic_atan2=cordic_atan2_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

@@ -75,3 +75,11 @@ def random_lasts(rng, n: int, every: int = 64) -> list[bool]:
     lasts = [rng.random() < 1 / every for _ in range(n)]
     lasts[-1] = True
     return lasts
+
+
+def log_uniform(rng: np.random.Generator, width: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Unsigned `width`-bit values spread over every magnitude: the bit length uniform in
+    0 .. width (0 gives the value 0), then the value uniform among those of that length."""
+    bits = rng.integers(0, width + 1, size=shape)
+    hi = np.left_shift(np.int64(1), bits)
+    return rng.integers(hi >> 1, hi)

@@ -29,7 +29,7 @@ def waves_possible(sim: str) -> bool:
     return sim == "icarus" or LZ4_HEADER.exists()
 
 
-MODULES = ["grng", "exp"]
+MODULES = ["grng", "exp", "sqrt", "recip", "cordic_atan2"]
 
 
 @pytest.mark.parametrize("sim", SIMS)
@@ -63,6 +63,18 @@ MUTANTS = {
                       "if (s >= (NW+1)'($unsigned(MW))) begin"),
     "exp-last": ("exp", "exp.sv.j2", "assign m_axis_tlast = last_q[LATENCY-1];",
                  "assign m_axis_tlast = last_q[LATENCY-2];"),
+    "sqrt-digit-compare": ("sqrt", "sqrt_lane.sv.j2", "assign ge{{ k }} = p{{ k }} >= t{{ k }};",
+                           "assign ge{{ k }} = p{{ k }} > t{{ k }};"),
+    "recip-rounding": ("recip", "recip_lane.sv.j2",
+                       "assign sum = {1'b0, quo_q} + {{ out_width + 1 }}'(rb_q);",
+                       "assign sum = {1'b0, quo_q} + {{ out_width + 1 }}'(1'b0);"),
+    # the last iteration only: its wrong turn moves the angle by 2 ANGLE[N-1], about 0.6 LSB
+    "cordic-direction": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
+                         "assign up{{ i }} = y{{ i }}_q >= 0;",
+                         "assign up{{ i }} = {{ '!' if loop.last else '' }}(y{{ i }}_q >= 0);"),
+    "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
+                           "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
+                           "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
 }
 
 
