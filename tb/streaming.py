@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import RisingEdge
+from cocotb.triggers import ClockCycles, RisingEdge
 
-from gpf.tb.harness import Bench
+from gpf.tb.harness import Bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
 
@@ -83,3 +83,43 @@ def log_uniform(rng: np.random.Generator, width: int, shape: tuple[int, ...]) ->
     bits = rng.integers(0, width + 1, size=shape)
     hi = np.left_shift(np.int64(1), bits)
     return rng.integers(hi >> 1, hi)
+
+
+Inputs = Callable[[int, str], dict[str, np.ndarray]]   # (beats, tag) -> raw input fields
+
+
+def random_beat_count(b: Bench, stalls: tuple[float, float]) -> int:
+    """The main stall shape gets the full count (10,000; 100,000 at TEST_LEVEL=long)."""
+    return (100_000 if b.long else 10_000) if stalls == (0.3, 0.3) else 2_000
+
+
+async def check_random_beats(dut: SimHandleBase, block: StreamBlock, b: Bench,
+                             inputs: Inputs, stalls: tuple[float, float]) -> None:
+    """Random beats with input gaps and output stalls: every field bit-exact, tlast carried."""
+    n = random_beat_count(b, stalls)
+    tag = f"{block.name}-{stalls}"
+    idle_inputs(dut)
+    await start(dut)
+    sb, _, _ = await run_stream(dut, block, b, inputs(n, tag), random_lasts(b.rng(tag), n),
+                                *stalls, tag)
+    dut._log.info("stalls in/out %s: %s", stalls, sb.summary())
+    sb.assert_clean()
+
+
+async def check_latency_and_throughput(dut: SimHandleBase, block: StreamBlock, b: Bench,
+                                       inputs: Inputs, n: int = 500) -> None:
+    """Without stalls: the first result LATENCY clocks after the first beat, then one a clock,
+    so n beats take n + LATENCY clocks."""
+    idle_inputs(dut)
+    await start(dut)
+    await ClockCycles(dut.clk, 3)
+    tag = f"{block.name}-tp"
+    sb, mon_in, mon_out = await run_stream(dut, block, b, inputs(n, tag),
+                                           [False] * (n - 1) + [True], 0.0, 0.0, tag)
+    sb.assert_clean()
+    first_in, first_out = mon_in.beats[0].cycle, mon_out.beats[0].cycle
+    assert first_out - first_in == block.latency, (
+        f"latency {first_out - first_in}, manifest says {block.latency}")
+    span = mon_out.beats[-1].cycle - first_in + 1
+    assert span == n + block.latency, (
+        f"{n} beats took {span} clocks, expected {n + block.latency}")

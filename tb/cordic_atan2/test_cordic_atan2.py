@@ -8,7 +8,6 @@ import dataclasses
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles
 
 from gpf.model.fixed import Format
 from gpf.model.formats import datapath
@@ -16,7 +15,13 @@ from gpf.model.primitives import Cordic
 from gpf.rtl.generate import cordic_model
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field
-from gpf.tb.streaming import StreamBlock, idle_inputs, random_lasts, run_stream
+from gpf.tb.streaming import (
+    StreamBlock,
+    check_latency_and_throughput,
+    check_random_beats,
+    idle_inputs,
+    run_stream,
+)
 
 
 class Turns(Format):
@@ -112,14 +117,10 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
     carried."""
     b = bench()
     blk = block(b)
-    n = (100_000 if b.long else 10_000) if stalls == (0.3, 0.3) else 2_000
-    idle_inputs(dut)
-    await start(dut)
-    tag = f"cordic-{stalls}"
-    sb, _, _ = await run_stream(dut, blk, b, random_xy(b, blk.fields_in[0].fmt, n, tag),
-                                random_lasts(b.rng(tag), n), *stalls, tag)
-    dut._log.info("stalls in/out %s: %s", stalls, sb.summary())
-    sb.assert_clean()
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return random_xy(b, blk.fields_in[0].fmt, n, tag)
+
+    await check_random_beats(dut, blk, b, inputs, stalls)
 
 
 @cocotb.test()
@@ -159,19 +160,10 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
     """Without stalls: the first result LATENCY clocks after the first beat, then one a clock."""
     b = bench()
     blk = block(b)
-    n = 500
-    idle_inputs(dut)
-    await start(dut)
-    await ClockCycles(dut.clk, 3)
-    sb, mon_in, mon_out = await run_stream(
-        dut, blk, b, random_xy(b, blk.fields_in[0].fmt, n, "cordic-tp"),
-        [False] * (n - 1) + [True], 0.0, 0.0, "cordic-tp")
-    sb.assert_clean()
-    first_in, first_out = mon_in.beats[0].cycle, mon_out.beats[0].cycle
-    assert first_out - first_in == blk.latency, (
-        f"latency {first_out - first_in}, manifest says {blk.latency}")
-    span = mon_out.beats[-1].cycle - first_in + 1
-    assert span == n + blk.latency, f"{n} beats took {span} clocks, expected {n + blk.latency}"
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return random_xy(b, blk.fields_in[0].fmt, n, tag)
+
+    await check_latency_and_throughput(dut, blk, b, inputs)
 
 
 @cocotb.test()

@@ -6,7 +6,6 @@ from __future__ import annotations
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles
 
 from gpf.model.fixed import Format
 from gpf.model.formats import INV_GUARD, datapath
@@ -14,7 +13,14 @@ from gpf.model.primitives import recip
 from gpf.rtl.generate import recip_context
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
-from gpf.tb.streaming import StreamBlock, idle_inputs, log_uniform, random_lasts, run_stream
+from gpf.tb.streaming import (
+    StreamBlock,
+    check_latency_and_throughput,
+    check_random_beats,
+    idle_inputs,
+    log_uniform,
+    run_stream,
+)
 
 
 def formats(b: Bench) -> tuple[Format, Format, int]:
@@ -84,14 +90,10 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
     """Random L with random input gaps and output stalls: every 1/L bit-exact, tlast carried."""
     b = bench()
     blk = block(b)
-    n = (100_000 if b.long else 10_000) if stalls == (0.3, 0.3) else 2_000
-    idle_inputs(dut)
-    await start(dut)
-    tag = f"recip-{stalls}"
-    sb, _, _ = await run_stream(dut, blk, b, {"l": random_l(b, n, tag)},
-                                random_lasts(b.rng(tag), n), *stalls, tag)
-    dut._log.info("stalls in/out %s: %s", stalls, sb.summary())
-    sb.assert_clean()
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return {"l": random_l(b, n, tag)}
+
+    await check_random_beats(dut, blk, b, inputs, stalls)
 
 
 @cocotb.test()
@@ -118,19 +120,10 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
     """Without stalls: the first result LATENCY clocks after the first beat, then one a clock."""
     b = bench()
     blk = block(b)
-    n = 500
-    idle_inputs(dut)
-    await start(dut)
-    await ClockCycles(dut.clk, 3)
-    sb, mon_in, mon_out = await run_stream(
-        dut, blk, b, {"l": random_l(b, n, "recip-tp")}, [False] * (n - 1) + [True], 0.0, 0.0,
-        "recip-tp")
-    sb.assert_clean()
-    first_in, first_out = mon_in.beats[0].cycle, mon_out.beats[0].cycle
-    assert first_out - first_in == blk.latency, (
-        f"latency {first_out - first_in}, manifest says {blk.latency}")
-    span = mon_out.beats[-1].cycle - first_in + 1
-    assert span == n + blk.latency, f"{n} beats took {span} clocks, expected {n + blk.latency}"
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return {"l": random_l(b, n, tag)}
+
+    await check_latency_and_throughput(dut, blk, b, inputs)
 
 
 @cocotb.test()
