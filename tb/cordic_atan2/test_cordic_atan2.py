@@ -16,6 +16,7 @@ from gpf.rtl.generate import cordic_model
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field
 from gpf.tb.streaming import (
+    Inputs,
     StreamBlock,
     check_latency_and_throughput,
     check_random_beats,
@@ -110,6 +111,15 @@ def exact_angle(x: int, y: int, width: int) -> int | None:
     return eighths << (width - 3)
 
 
+def random_inputs(b: Bench, blk: StreamBlock) -> Inputs:
+    """The random stimulus of the random-beats and throughput tests."""
+
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return random_xy(b, blk.fields_in[0].fmt, n, tag)
+
+    return inputs
+
+
 @cocotb.test()
 @cocotb.parametrize(stalls=[(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)])
 async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> None:
@@ -117,10 +127,7 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
     carried."""
     b = bench()
     blk = block(b)
-    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
-        return random_xy(b, blk.fields_in[0].fmt, n, tag)
-
-    await check_random_beats(dut, blk, b, inputs, stalls)
+    await check_random_beats(dut, blk, b, random_inputs(b, blk), stalls)
 
 
 @cocotb.test()
@@ -160,10 +167,7 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
     """Without stalls: the first result LATENCY clocks after the first beat, then one a clock."""
     b = bench()
     blk = block(b)
-    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
-        return random_xy(b, blk.fields_in[0].fmt, n, tag)
-
-    await check_latency_and_throughput(dut, blk, b, inputs)
+    await check_latency_and_throughput(dut, blk, b, random_inputs(b, blk))
 
 
 @cocotb.test()

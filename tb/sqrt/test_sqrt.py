@@ -14,6 +14,7 @@ from gpf.rtl.generate import sqrt_context
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
+    Inputs,
     StreamBlock,
     check_latency_and_throughput,
     check_random_beats,
@@ -83,6 +84,15 @@ def corner_d(b: Bench) -> list[int]:
     return sorted(v for v in values if 0 <= v <= d_fmt.max_raw)
 
 
+def random_inputs(b: Bench, blk: StreamBlock) -> Inputs:
+    """The random stimulus of the random-beats and throughput tests."""
+
+    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
+        return {"d": random_d(b, n, tag)}
+
+    return inputs
+
+
 @cocotb.test()
 @cocotb.parametrize(stalls=[(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)])
 async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> None:
@@ -90,10 +100,7 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
     carried."""
     b = bench()
     blk = block(b)
-    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
-        return {"d": random_d(b, n, tag)}
-
-    await check_random_beats(dut, blk, b, inputs, stalls)
+    await check_random_beats(dut, blk, b, random_inputs(b, blk), stalls)
 
 
 @cocotb.test()
@@ -120,10 +127,7 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
     """Without stalls: the first result LATENCY clocks after the first beat, then one a clock."""
     b = bench()
     blk = block(b)
-    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
-        return {"d": random_d(b, n, tag)}
-
-    await check_latency_and_throughput(dut, blk, b, inputs)
+    await check_latency_and_throughput(dut, blk, b, random_inputs(b, blk))
 
 
 def off_by_one(d_fmt: Format, l_fmt: Format):
