@@ -66,6 +66,16 @@ def grng_view(cfg: Config, sim: str) -> list[Group]:
     return groups
 
 
+def _stream(top: str, label: str, side: str, width: int, lanes: int,
+            fields: list[tuple[str, int, int, int | None]], signed: bool = False) -> Group:
+    """One AXI4-Stream side: handshake bits and each lane's fields (name, offset, width, frac)."""
+    return Group(label, [_bit(f"{top}.{side}_tvalid"), _bit(f"{top}.{side}_tready"),
+                         _bit(f"{top}.{side}_tlast")] + [
+        Trace(f"{top}.{side}_tdata", width * i + off + w - 1, width * i + off,
+              label=f"lane{i} {name}", signed=signed, frac_bits=frac)
+        for i in range(lanes) for name, off, w, frac in fields])
+
+
 def exp_view(cfg: Config, sim: str) -> list[Group]:
     dp = datapath(cfg)
     k = exp_context(cfg)
@@ -73,14 +83,10 @@ def exp_view(cfg: Config, sim: str) -> list[Group]:
     lane = "exp.g_lane[0].u_lane"
     return [
         Group("clock and reset", [_bit("exp.clk"), _bit("exp.rst")]),
-        Group(f"input t ({dp.t})", [_bit("exp.s_axis_tvalid"), _bit("exp.s_axis_tready"),
-                                    _bit("exp.s_axis_tlast")] + [
-            Trace("exp.s_axis_tdata", iw * (i + 1) - 1, iw * i, label=f"lane{i} t",
-                  frac_bits=dp.t.frac_bits) for i in range(cfg.lanes)]),
-        Group(f"output w ({dp.weight})", [_bit("exp.m_axis_tvalid"), _bit("exp.m_axis_tready"),
-                                          _bit("exp.m_axis_tlast")] + [
-            Trace("exp.m_axis_tdata", ow * (i + 1) - 1, ow * i, label=f"lane{i} w",
-                  frac_bits=dp.weight.frac_bits) for i in range(cfg.lanes)]),
+        _stream("exp", f"input t ({dp.t})", "s_axis", iw, cfg.lanes,
+                [("t", 0, iw, dp.t.frac_bits)]),
+        _stream("exp", f"output w ({dp.weight})", "m_axis", ow, cfg.lanes,
+                [("w", 0, ow, dp.weight.frac_bits)]),
         Group("lane 0 pipeline", [
             Trace(f"{lane}.n1_q", iw - k["in_frac"] - 1, 0, label="n (integer part)",
                   frac_bits=0),
@@ -100,17 +106,10 @@ def cordic_atan2_view(cfg: Config, sim: str) -> list[Group]:
     top, lane = "cordic_atan2", "cordic_atan2.g_lane[0].u_lane"
     return [
         Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
-        Group(f"input x, y ({dp.x[0]})", [_bit(f"{top}.s_axis_tvalid"),
-                                          _bit(f"{top}.s_axis_tready"),
-                                          _bit(f"{top}.s_axis_tlast")] + [
-            Trace(f"{top}.s_axis_tdata", 2 * iw * i + off + iw - 1, 2 * iw * i + off,
-                  label=f"lane{i} {name}", signed=True, frac_bits=frac)
-            for i in range(cfg.lanes) for name, off in (("x", 0), ("y", iw))]),
-        Group("output angle (turns)", [_bit(f"{top}.m_axis_tvalid"),
-                                       _bit(f"{top}.m_axis_tready"),
-                                       _bit(f"{top}.m_axis_tlast")] + [
-            Trace(f"{top}.m_axis_tdata", aw * (i + 1) - 1, aw * i, label=f"lane{i} angle",
-                  signed=True, frac_bits=aw) for i in range(cfg.lanes)]),
+        _stream(top, f"input x, y ({dp.x[0]})", "s_axis", 2 * iw, cfg.lanes,
+                [("x", 0, iw, frac), ("y", iw, iw, frac)], signed=True),
+        _stream(top, "output angle (turns)", "m_axis", aw, cfg.lanes,
+                [("angle", 0, aw, aw)], signed=True),
         Group("lane 0 pipeline", [
             Trace(f"{lane}.zero_q", 0, 0, label="x = y = 0, stage 1"),
             Trace(f"{lane}.x0_q", xyw - 1, 0, label="X, pre-rotated", signed=True,
@@ -126,16 +125,6 @@ def cordic_atan2_view(cfg: Config, sim: str) -> list[Group]:
                   frac_bits=aw),
         ]),
     ]
-
-
-def _stream(top: str, label: str, side: str, width: int, lanes: int,
-            fields: list[tuple[str, int, int, int | None]]) -> Group:
-    """One AXI4-Stream side: handshake bits and each lane's fields (name, offset, width, frac)."""
-    return Group(label, [_bit(f"{top}.{side}_tvalid"), _bit(f"{top}.{side}_tready"),
-                         _bit(f"{top}.{side}_tlast")] + [
-        Trace(f"{top}.{side}_tdata", width * i + off + w - 1, width * i + off,
-              label=f"lane{i} {name}", frac_bits=frac)
-        for i in range(lanes) for name, off, w, frac in fields])
 
 
 def sqrt_view(cfg: Config, sim: str) -> list[Group]:
