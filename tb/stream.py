@@ -72,22 +72,29 @@ class StreamMonitor:
 
 class StreamDriver:
     """Drives an AXI4-Stream slave port (`<name>_tvalid/tready/tdata/tlast`) with beats, idle
-    for a random clock before a beat with probability `idle`; holds each beat until taken."""
+    for a random clock before a beat with probability `idle`; holds each beat until taken.
+
+    A beat may carry a new value for the `op` port (per-step operands, which the block samples
+    with the first beat of a step): it is driven as that beat is presented."""
 
     def __init__(self, clk: SimHandleBase, prefix: SimHandleBase, name: str, idle: float,
-                 rng: random.Random):
-        self.clk, self.idle, self.rng = clk, idle, rng
+                 rng: random.Random, op: SimHandleBase | None = None):
+        self.clk, self.idle, self.rng, self.op = clk, idle, rng, op
         self.tvalid = getattr(prefix, f"{name}_tvalid")
         self.tready = getattr(prefix, f"{name}_tready")
         self.tdata = getattr(prefix, f"{name}_tdata")
         self.tlast = getattr(prefix, f"{name}_tlast")
         self.tvalid.value = 0
 
-    async def send(self, beats: list[tuple[int, bool]]) -> None:
-        for data, last in beats:
+    async def send(self, beats: list[tuple[int, bool]] | list[tuple[int, bool, int | None]]
+                   ) -> None:
+        for data, last, *op in beats:
             while self.rng.random() < self.idle:
                 self.tvalid.value = 0
                 await RisingEdge(self.clk)
+            if op and op[0] is not None:
+                assert self.op is not None, "operands given but no op port"
+                self.op.value = op[0]
             self.tvalid.value = 1
             self.tdata.value = data
             self.tlast.value = int(last)

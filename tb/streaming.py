@@ -1,11 +1,15 @@
-"""The test every pipelined stream block gets: random beats through the block with random
-stalls on both sides, every output field checked bit-exactly against the block's model (fed
-from the input beats seen on the bus), tlast carried, and the no-stall throughput and latency."""
+"""The test every stream block gets: random beats through the block with random stalls on both
+sides, every output field checked bit-exactly against the block's model (fed from the input
+beats seen on the bus), tlast carried, and the no-stall throughput and latency.
+
+A step is the beats up to and including one with tlast. Blocks with per-step operands (mu and L,
+a measurement, ...) take them on an `op` port, sampled with the first beat of each step. A
+reducing block (moments) answers a whole step with one beat."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from cocotb.handle import SimHandleBase
@@ -15,7 +19,10 @@ from gpf.tb.harness import Bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
 
+# raw input fields (beats, lanes) -> raw output fields (output beats, lanes). `seen` also holds
+# STEP, each input beat's step number (beats,), and every operand field per input beat (beats,).
 Model = Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]
+STEP = "_step"
 
 
 @dataclass
@@ -26,8 +33,11 @@ class StreamBlock:
     fields_in: list[Field]
     fields_out: list[Field]
     lanes: int
-    latency: int
-    model: Model          # raw input fields (beats, lanes) -> raw output fields
+    latency: int          # clocks from an input beat (reducing: a step's last) to its output
+    model: Model
+    fields_op: list[Field] = field(default_factory=list)   # per-step operands on `op`
+    reduces: bool = False  # one output beat (tlast set, one lane) per input step
+    interval: int = 1      # clocks between input beats at full rate (serial blocks: more)
 
 
 def idle_inputs(dut: SimHandleBase) -> None:
@@ -37,19 +47,50 @@ def idle_inputs(dut: SimHandleBase) -> None:
     dut.m_axis_tready.value = 1
 
 
+def step_numbers(lasts: list[bool]) -> np.ndarray:
+    """The step of every beat: a step ends with a beat whose tlast is set."""
+    ends = np.asarray(lasts, dtype=np.int64)
+    return np.concatenate(([0], np.cumsum(ends)[:-1])).astype(np.int64)
+
+
+def with_operands(block: StreamBlock, seen: dict[str, np.ndarray], lasts: list[bool],
+                  ops: dict[str, np.ndarray] | None) -> dict[str, np.ndarray]:
+    """`seen` plus STEP and each beat's operands (the values of its step)."""
+    steps = step_numbers(lasts)
+    out = dict(seen, **{STEP: steps})
+    for f in block.fields_op:
+        out[f.name] = np.asarray(ops[f.name], dtype=np.int64)[steps]
+    return out
+
+
+def _op_words(block: StreamBlock, ops: dict[str, np.ndarray] | None, lasts: list[bool]
+              ) -> list[int | None]:
+    """The `op` word to drive with each beat: a step's operands with its first beat."""
+    if not block.fields_op:
+        return [None] * len(lasts)
+    words = pack(block.fields_op, {k: np.asarray(v)[:, None] for k, v in ops.items()})
+    firsts = [True] + list(lasts[:-1])
+    steps = step_numbers(lasts)
+    return [words[s] if first else None for s, first in zip(steps, firsts, strict=True)]
+
+
 async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
                      inputs: dict[str, np.ndarray], lasts: list[bool], stall_in: float,
-                     stall_out: float, tag: str, expect_mismatch: bool = False
+                     stall_out: float, tag: str, expect_mismatch: bool = False,
+                     ops: dict[str, np.ndarray] | None = None
                      ) -> tuple[Scoreboard, StreamMonitor, StreamMonitor]:
-    """Send every beat, collect as many outputs (failing, not hanging, if they stop), score."""
+    """Send every beat (and each step's operands, (steps,) per operand field), collect as many
+    outputs as due (failing, not hanging, if they stop), score."""
     mon_in = StreamMonitor(dut.clk, dut, "s_axis", has_last=True)
     mon_out = StreamMonitor(dut.clk, dut, "m_axis", has_last=True)
     ready = ReadyDriver(dut.clk, dut.m_axis_tready, stall_out, b.rng(f"{tag}-ready"))
-    driver = StreamDriver(dut.clk, dut, "s_axis", stall_in, b.rng(f"{tag}-valid"))
-    n = len(lasts)
+    driver = StreamDriver(dut.clk, dut, "s_axis", stall_in, b.rng(f"{tag}-valid"),
+                          op=dut.op if block.fields_op else None)
+    n = sum(lasts) if block.reduces else len(lasts)
     await RisingEdge(dut.clk)  # the monitors sample from the next clock on: start there
-    await driver.send(list(zip(pack(block.fields_in, inputs), lasts, strict=True)))
-    limit, clocks = 50 * n + 100 + 10 * block.latency, 0
+    await driver.send(list(zip(pack(block.fields_in, inputs), lasts,
+                               _op_words(block, ops, lasts), strict=True)))
+    limit, clocks = 50 * n * block.interval + 100 + 10 * block.latency, 0
     while len(mon_out.beats) < n:
         await RisingEdge(dut.clk)
         clocks += 1
@@ -61,13 +102,16 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
     mon_out.stop()
     assert len(mon_out.beats) == n, f"{block.name}: {len(mon_out.beats)} beats out for {n} in"
     seen = unpack([beat.data for beat in mon_in.beats], block.fields_in, block.lanes)
-    expected = block.model(seen)
+    lasts_in = [beat.last for beat in mon_in.beats]
+    expected = block.model(with_operands(block, seen, lasts_in, ops))
     sb = Scoreboard(block.name, block.fields_out, expect_mismatch=expect_mismatch)
     sb.compare(expected, unpack([beat.data for beat in mon_out.beats], block.fields_out,
-                                block.lanes))
-    lasts_in = [beat.last for beat in mon_in.beats]
+                                1 if block.reduces else block.lanes))
     lasts_out = [beat.last for beat in mon_out.beats]
-    assert lasts_out == lasts_in, f"{block.name}: tlast not carried with its beat"
+    if block.reduces:
+        assert all(lasts_out), f"{block.name}: a step's result beat without tlast"
+    else:
+        assert lasts_out == lasts_in, f"{block.name}: tlast not carried with its beat"
     return sb, mon_in, mon_out
 
 
@@ -86,6 +130,7 @@ def log_uniform(rng: np.random.Generator, width: int, shape: tuple[int, ...]) ->
 
 
 Inputs = Callable[[int, str], dict[str, np.ndarray]]   # (beats, tag) -> raw input fields
+Operands = Callable[[int, str], dict[str, np.ndarray]]  # (steps, tag) -> (steps,) per field
 
 
 def random_beat_count(b: Bench, stalls: tuple[float, float]) -> int:
@@ -94,32 +139,40 @@ def random_beat_count(b: Bench, stalls: tuple[float, float]) -> int:
 
 
 async def check_random_beats(dut: SimHandleBase, block: StreamBlock, b: Bench,
-                             inputs: Inputs, stalls: tuple[float, float]) -> None:
-    """Random beats with input gaps and output stalls: every field bit-exact, tlast carried."""
+                             inputs: Inputs, stalls: tuple[float, float],
+                             operands: Operands | None = None, every: int = 64) -> None:
+    """Random beats with input gaps and output stalls (steps of about `every` beats, each with
+    its own random operands): every field bit-exact, tlast carried."""
     n = random_beat_count(b, stalls)
     tag = f"{block.name}-{stalls}"
+    lasts = random_lasts(b.rng(tag), n, every)
+    ops = operands(sum(lasts), tag) if operands else None
     idle_inputs(dut)
     await start(dut)
-    sb, _, _ = await run_stream(dut, block, b, inputs(n, tag), random_lasts(b.rng(tag), n),
-                                *stalls, tag)
+    sb, _, _ = await run_stream(dut, block, b, inputs(n, tag), lasts, *stalls, tag, ops=ops)
     dut._log.info("stalls in/out %s: %s", stalls, sb.summary())
     sb.assert_clean()
 
 
 async def check_latency_and_throughput(dut: SimHandleBase, block: StreamBlock, b: Bench,
-                                       inputs: Inputs, n: int = 500) -> None:
-    """Without stalls: the first result LATENCY clocks after the first beat, then one a clock,
-    so n beats take n + LATENCY clocks."""
+                                       inputs: Inputs, n: int = 500,
+                                       operands: Operands | None = None) -> None:
+    """Without stalls: the first result LATENCY clocks after the first beat (reducing: after
+    the step's last), a new input beat every INTERVAL clocks, so n beats (one step) take
+    (n - 1) INTERVAL + 1 + LATENCY clocks."""
     idle_inputs(dut)
     await start(dut)
     await ClockCycles(dut.clk, 3)
     tag = f"{block.name}-tp"
-    sb, mon_in, mon_out = await run_stream(dut, block, b, inputs(n, tag),
-                                           [False] * (n - 1) + [True], 0.0, 0.0, tag)
+    lasts = [True] * n if block.interval > 1 else [False] * (n - 1) + [True]
+    ops = operands(sum(lasts), tag) if operands else None
+    sb, mon_in, mon_out = await run_stream(dut, block, b, inputs(n, tag), lasts, 0.0, 0.0,
+                                           tag, ops=ops)
     sb.assert_clean()
-    first_in, first_out = mon_in.beats[0].cycle, mon_out.beats[0].cycle
-    assert first_out - first_in == block.latency, (
-        f"latency {first_out - first_in}, manifest says {block.latency}")
+    first_in = mon_in.beats[0].cycle
+    answered = mon_in.beats[-1 if block.reduces else 0].cycle
+    latency = mon_out.beats[0].cycle - answered
+    assert latency == block.latency, f"latency {latency}, manifest says {block.latency}"
     span = mon_out.beats[-1].cycle - first_in + 1
-    assert span == n + block.latency, (
-        f"{n} beats took {span} clocks, expected {n + block.latency}")
+    due = (n - 1) * block.interval + 1 + block.latency
+    assert span == due, f"{n} beats took {span} clocks, expected {due}"
