@@ -6,6 +6,7 @@ from the same model objects the testbenches check against, so no constant is typ
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -18,8 +19,9 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
+from gpf.model.blocks import _OMEGA_Q, _ROT
 from gpf.model.fixed import Format
-from gpf.model.formats import INV_GUARD, datapath
+from gpf.model.formats import CONST_WIDTH, INV_GUARD, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip
 
@@ -190,6 +192,186 @@ def recip_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+@dataclass(frozen=True)
+class _Sig:
+    """A signal of a generated datapath: its name, exact raw range and binary point."""
+
+    name: str
+    lo: int
+    hi: int
+    frac: int
+    width: int = 0   # 0: the fewest signed bits that hold [lo, hi]
+
+    @property
+    def w(self) -> int:
+        return self.width or _signed_bits(self.lo, self.hi)
+
+
+def _signed_bits(lo: int, hi: int) -> int:
+    return max(1, (-lo - 1).bit_length() + 1 if lo < 0 else 0, hi.bit_length() + 1)
+
+
+def _word(name: str, fmt: Format) -> _Sig:
+    return _Sig(name, fmt.min_raw, fmt.max_raw, fmt.frac_bits, fmt.width)
+
+
+def _product(base: str, a: _Sig, b: _Sig) -> tuple[_Sig, dict[str, Any]]:
+    """An exact product registered as `<base>_q`: its signal and the template's line."""
+    ends = [x * y for x in (a.lo, a.hi) for y in (b.lo, b.hi)]
+    w = max(_signed_bits(min(ends), max(ends)), a.w, b.w)
+    p = _Sig(f"{base}_q", min(ends), max(ends), a.frac + b.frac, w)
+    return p, {"name": p.name, "a": a.name, "aw": a.w, "b": b.name, "bw": b.w, "w": w}
+
+
+def _round_sum(base: str, terms: list[tuple[int, _Sig]], width: int, frac: int
+               ) -> tuple[_Sig, dict[str, Any]]:
+    """round_sum() of the model, registered as `<base>_q`: sum of coef * term (coef +-2^k),
+    rounded half up once to `width` signed bits with `frac` fraction bits, saturated. Widths
+    come from the exact ranges; where the rounded sum always fits, no saturation logic."""
+    top = max(t.frac for _, t in terms)
+    shift = top - frac
+    if shift < 0:
+        raise ValueError(f"propagate_uav: {base} has more fraction bits than its terms")
+    lo = hi = (1 << shift) >> 1   # the rounding half
+    sw, parts = 0, []
+    for coef, t in terms:
+        k = abs(coef).bit_length() - 1
+        if abs(coef) != 1 << k:
+            raise ValueError(f"propagate_uav: coefficient {coef} of {base} is not +-2^k")
+        ls = top - t.frac + k
+        tlo, thi = (t.lo << ls, t.hi << ls) if coef > 0 else (-(t.hi << ls), -(t.lo << ls))
+        lo, hi = lo + tlo, hi + thi
+        sw = max(sw, t.w + ls + 1)
+        if t.lo == t.hi == 0:
+            continue   # a zero constant (g_E, g_N): its binary point still counts above
+        parts.append({"neg": coef < 0, "name": t.name, "w": t.w, "shift": ls})
+    sw = max(sw, _signed_bits(lo, hi))
+    omin, omax = -(1 << (width - 1)), (1 << (width - 1)) - 1
+    rlo, rhi = lo >> shift, hi >> shift
+    r = _Sig(f"{base}_q", max(rlo, omin), min(rhi, omax), frac, width)
+    sat = rlo < omin or rhi > omax
+    # no saturation: the rounded sum is kept just as wide as the output (or sign-extended)
+    rw = sw - shift if sat else min(sw - shift, width)
+    return r, {"base": base, "terms": parts, "sw": sw, "shift": shift,
+               "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat}
+
+
+def _to(fmt: Format) -> tuple[int, int]:
+    return fmt.width, fmt.frac_bits
+
+
+def _const(name: str, c: Any) -> _Sig:
+    return _Sig(name, c.raw, c.raw, c.frac, CONST_WIDTH)
+
+
+def propagate_uav_context(cfg: Config) -> dict[str, Any]:
+    """q' = q + Omega(omega') q dt/2 and v' = v + (C(q) a' + g) dt, as blocks.propagate_uav.
+
+    Six stages: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
+    2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
+    5 h_k q_j and f dt; 6 q' and v' rounded. Every sum's signs and indices come from the
+    model's own tables (_OMEGA_Q, _ROT), every width from the exact ranges of its terms.
+    """
+    dp = datapath(cfg)
+    if dp.app != "uav" or dp.gyro is None or dp.accel is None or dp.rot is None:
+        raise ValueError("propagate_uav: the uav application's block")
+    c = dp.consts
+    k_sw, k_sa, k_dt2, k_dt = (_const(f"C_{n.upper()}", c[n]) for n in ("s_w", "s_a", "dt2", "dt"))
+    g = [_const(f"C_G{n}", c[f"g{n}"]) for n in range(3)]
+    x = [_word(f"x{i}", fmt) for i, fmt in enumerate(dp.x)]
+    e = [_word(f"e{j}", dp.noise) for j in range(6)]
+    # stage 1: noise products and every distinct q_a q_b of C(q); operands copied
+    s1, pe = [], []
+    for j in range(6):
+        p, line = _product(f"pe{j}", e[j], k_sw if j < 3 else k_sa)
+        pe.append(p)
+        s1.append(line)
+    pq = {}
+    for a, b in sorted({tuple(sorted((a, b))) for row in _ROT for entry in row
+                        for _, a, b in entry}):
+        pq[a, b], line = _product(f"pq{a}{b}", x[a], x[b])
+        s1.append(line)
+    omega = [_word(f"om{k}_q", dp.gyro) for k in range(3)]
+    accel = [_word(f"ac{m}_q", dp.accel) for m in range(3)]
+    # stage 2: omega' = omega + s_w e, a' = a + s_a e, C(q) entries: one rounding each
+    s2, w2, a2, rot = [], [], [], {}
+    for k in range(3):
+        sig, line = _round_sum(f"w{k}", [(1, omega[k]), (1, pe[k])], *_to(dp.gyro))
+        w2.append(sig)
+        s2.append(line)
+    for m in range(3):
+        sig, line = _round_sum(f"a{m}", [(1, accel[m]), (1, pe[3 + m])], *_to(dp.accel))
+        a2.append(sig)
+        s2.append(line)
+    for n, row in enumerate(_ROT):
+        for m, entry in enumerate(row):
+            terms = [(coef, pq[tuple(sorted((a, b)))]) for coef, a, b in entry]
+            rot[n, m], line = _round_sum(f"c{n}{m}", terms, *_to(dp.rot))
+            s2.append(line)
+    # stage 3: omega' dt/2 and C_nm a'_m
+    s3, ph, pca = [], [], {}
+    for k in range(3):
+        p, line = _product(f"ph{k}", w2[k], k_dt2)
+        ph.append(p)
+        s3.append(line)
+    for (n, m), cnm in rot.items():
+        pca[n, m], line = _product(f"pc{n}{m}", cnm, a2[m])
+        s3.append(line)
+    # stage 4: h = omega' dt/2 (one word, h_frac fraction bits), f = C a' + g
+    s4, h4, f4 = [], [], []
+    for k in range(3):
+        sig, line = _round_sum(f"h{k}", [(1, ph[k])], dp.word, dp.h_frac)
+        h4.append(sig)
+        s4.append(line)
+    for n in range(3):
+        terms = [(1, pca[n, m]) for m in range(3)] + [(1, g[n])]
+        sig, line = _round_sum(f"f{n}", terms, *_to(dp.accel))
+        f4.append(sig)
+        s4.append(line)
+    # stage 5: h_k q_j (q delayed to stage 4) and f dt
+    s5, phq, pf = [], {}, []
+    for row in _OMEGA_Q:
+        for _, k, j in row:
+            phq[k, j], line = _product(f"phq{k}{j}", h4[k], dataclasses.replace(
+                x[j], name=f"q{j}_d4"))
+            s5.append(line)
+    for n in range(3):
+        p, line = _product(f"pf{n}", f4[n], k_dt)
+        pf.append(p)
+        s5.append(line)
+    # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed to stage 5)
+    s6 = []
+    for i, row in enumerate(_OMEGA_Q):
+        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d5"))]
+        terms += [(sign, phq[k, j]) for sign, k, j in row]
+        s6.append(_round_sum(f"y{i}", terms, *_to(dp.x[i]))[1])
+    for n in range(3):
+        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d5")), (1, pf[n])]
+        s6.append(_round_sum(f"y{4 + n}", terms, *_to(dp.x[4 + n]))[1])
+    if len(set(dp.x[:4])) != 1 or len(set(dp.x[4:])) != 1:
+        raise ValueError("propagate_uav: q (and v) components must share one format")
+    widths = [fmt.width for fmt in dp.x]
+    return {
+        "lanes": cfg.lanes, "latency": 6,
+        "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
+        "x_offsets": [sum(widths[:i]) for i in range(len(widths))], "x_width": sum(widths),
+        "q_width": dp.x[0].width, "v_width": dp.x[4].width,
+        "noise_width": dp.noise.width, "noise_fmt": str(dp.noise),
+        "gyro_width": dp.gyro.width, "gyro_fmt": str(dp.gyro),
+        "accel_width": dp.accel.width, "accel_fmt": str(dp.accel),
+        "rot_fmt": str(dp.rot), "h_frac": dp.h_frac,
+        "in_width": sum(widths) + 6 * dp.noise.width, "out_width": sum(widths) + 1,
+        "op_width": 3 * dp.gyro.width + 3 * dp.accel.width,
+        "consts": [{"name": s.name, "w": CONST_WIDTH, "hex": f"{_twos(s.lo, CONST_WIDTH):X}",
+                    "value": v.value, "frac": v.frac}
+                   for s, v in zip([k_sw, k_sa, k_dt2, k_dt, *g],
+                                   [c["s_w"], c["s_a"], c["dt2"], c["dt"],
+                                    *(c[f"g{n}"] for n in range(3))], strict=True)
+                   if v.raw != 0],   # a zero g_n drops out of its sum
+        "stages": [s1, s2, s3, s4, s5, s6],
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -209,6 +391,8 @@ MODULES: dict[str, Module] = {
                            cordic_atan2_context),
     "sqrt": Module("sqrt", ("sqrt_lane", "sqrt"), sqrt_context),
     "recip": Module("recip", ("recip_lane", "recip"), recip_context),
+    "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
+                            propagate_uav_context, apps=("uav",)),
 }
 
 
