@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from gpf.config import load_config
+from gpf.rtl.generate import MODULES as BLOCKS
 from gpf.rtl.generate import TEMPLATE_DIR
 from gpf.sim import run_sim
 from gpf.toolchain import LZ4_HEADER, icarus_missing
@@ -75,6 +76,16 @@ MUTANTS = {
     "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
                            "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
+    # q'2's last Omega term (+h0 q3 from the model's table) subtracted instead
+    "propagate_uav-omega-sign": ("propagate_uav", "propagate_uav_lane.sv.j2",
+                                 "(' - ' if t.neg else ' + ')",
+                                 "(' - ' if t.neg != (r.base == 'y2' and loop.last) else ' + ')"),
+    "propagate_uav-rounding": ("propagate_uav", "propagate_uav_lane.sv.j2",
+                               "'sd{{ r.half }}", "'sd{{ r.half // 2 }}"),
+    # every beat takes the operands held from the previous step's first beat
+    "propagate_uav-operands": ("propagate_uav", "propagate_uav.sv.j2",
+                               "assign op_beat = first_q ? op : op_hold_q;",
+                               "assign op_beat = op_hold_q;"),
 }
 
 
@@ -88,7 +99,8 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     text = path.read_text()
     assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
     path.write_text(text.replace(old, new))
-    result = run_sim(load_config("configs/bot.toml"), module, "icarus", seed=1,
+    config = "bot" if "bot" in BLOCKS[module].apps else "uav"   # the module's application
+    result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
                      log_file=tmp_path / "sim.log")
     assert result.tests > 0
