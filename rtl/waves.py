@@ -18,6 +18,7 @@ from gpf.rtl.generate import (
     cordic_atan2_context,
     exp_context,
     grng_context,
+    propagate_uav_context,
     recip_context,
     sqrt_context,
 )
@@ -178,9 +179,52 @@ def recip_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def propagate_uav_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = propagate_uav_context(cfg)
+    top, lane = "propagate_uav", "propagate_uav.g_lane[0].u_lane"
+    xw, nw, gw, aw = k["x_width"], k["noise_width"], k["gyro_width"], k["accel_width"]
+    names = ["q0", "q1", "q2", "q3", "vE", "vN", "vU"]
+    x_fields = [(names[i], k["x_offsets"][i], k["x_widths"][i], dp.x[i].frac_bits)
+                for i in range(7)]
+    e_fields = [(f"e{j}", xw + nw * j, nw, dp.noise.frac_bits) for j in range(6)]
+    out = _stream(top, "output x' (sat after each lane's state)", "m_axis", k["out_width"],
+                  cfg.lanes, [(f"{n}'", off, w, f) for n, off, w, f in x_fields], signed=True)
+    out.traces += [Trace(f"{top}.m_axis_tdata", k["out_width"] * i + xw, k["out_width"] * i + xw,
+                         label=f"lane{i} sat") for i in range(cfg.lanes)]
+
+    def word(sig: str, width: int, frac: int, label: str) -> Trace:
+        return Trace(f"{lane}.{sig}", width - 1, 0, label=label, signed=True, frac_bits=frac)
+
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        _stream(top, f"input x ({dp.x[0]}, {dp.x[4]}), e ({dp.noise})", "s_axis",
+                k["in_width"], cfg.lanes, x_fields + e_fields, signed=True),
+        Group(f"operands omega ({dp.gyro}), accel ({dp.accel})", [
+            _bit(f"{top}.first_q", "next beat starts a step")] + [
+            Trace(f"{top}.op_beat", gw * (m + 1) - 1, gw * m, label=f"omega{m} (this beat)",
+                  signed=True, frac_bits=dp.gyro.frac_bits) for m in range(3)] + [
+            Trace(f"{top}.op_beat", 3 * gw + aw * (m + 1) - 1, 3 * gw + aw * m,
+                  label=f"accel{m} (this beat)", signed=True, frac_bits=dp.accel.frac_bits)
+            for m in range(3)]),
+        out,
+        Group("lane 0 pipeline", [
+            word("w0_q", gw, dp.gyro.frac_bits, "omega'0, stage 2"),
+            word("a2_q", aw, dp.accel.frac_bits, "a'2, stage 2"),
+            word("c22_q", dp.rot.width, dp.rot.frac_bits, "C22, stage 2"),
+            word("h0_q", dp.word, dp.h_frac, "h0 = omega'0 dt/2, stage 4"),
+            word("f2_q", aw, dp.accel.frac_bits, "fU = (C a' + g)U, stage 4"),
+            word("y0_q", dp.x[0].width, dp.x[0].frac_bits, "q'0, stage 6"),
+            word("y6_q", dp.x[6].width, dp.x[6].frac_bits, "v'U, stage 6"),
+            Trace(f"{lane}.sat6_q", 0, 0, label="sat, stage 6"),
+        ]),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
+VIEWS.update(propagate_uav=propagate_uav_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:
