@@ -190,8 +190,10 @@ def propagate_uav_view(cfg: Config, sim: str) -> list[Group]:
     e_fields = [(f"e{j}", xw + nw * j, nw, dp.noise.frac_bits) for j in range(6)]
     out = _stream(top, "output x' (sat after each lane's state)", "m_axis", k["out_width"],
                   cfg.lanes, [(f"{n}'", off, w, f) for n, off, w, f in x_fields], signed=True)
-    out.traces += [Trace(f"{top}.m_axis_tdata", k["out_width"] * i + xw, k["out_width"] * i + xw,
-                         label=f"lane{i} sat") for i in range(cfg.lanes)]
+    sat_bits = [k["out_width"] * i + xw for i in range(cfg.lanes)]
+    out = Group(out.name, out.traces + [Trace(f"{top}.m_axis_tdata", bit, bit,
+                                              label=f"lane{i} sat")
+                                        for i, bit in enumerate(sat_bits)])
 
     def word(sig: str, width: int, frac: int, label: str) -> Trace:
         return Trace(f"{lane}.{sig}", width - 1, 0, label=label, signed=True, frac_bits=frac)
