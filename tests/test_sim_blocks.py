@@ -75,6 +75,22 @@ MUTANTS = {
     "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
                            "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
+    # operands sampled with the first beat after reset only: later steps use stale mu and L
+    "sample_cond-first-of-step": ("sample_cond", "sample_cond.sv.j2",
+                                  "first_q <= s_axis_tlast;", "first_q <= 1'b0;"),
+    # half an LSB minus one: only exact ties round differently (the corner test makes them)
+    "sample_cond-round-half": ("sample_cond", "_round_sum.sv.j2", "'sd{{ plan.half }}",
+                               "'sd{{ plan.half - 1 }}"),
+    "sample_cond-sat-any": ("sample_cond", "sample_cond_lane.sv.j2",
+                            "{% if not loop.last %} || {% endif %}",
+                            "{% if not loop.last %} && {% endif %}"),
+    # T for a in p' = p + T v + a e (a and b share their raw value: a = b dt / 2, dt = 1)
+    "propagate_bot-gain": ("propagate_bot", "propagate_bot_lane.sv.j2",
+                           "'(e{{ axis }}) * {{ ew + consts.a.width }}'(C_A);",
+                           "'(e{{ axis }}) * {{ ew + consts.a.width }}'(C_T);"),
+    "propagate_bot-sat-vy": ("propagate_bot", "propagate_bot_lane.sv.j2",
+                             "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf || vn1_ovf;",
+                             "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf;"),
 }
 
 
