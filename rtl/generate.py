@@ -372,6 +372,92 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def _signed_width(lo: int, hi: int) -> int:
+    """Bits of the smallest two's complement word holding every value in [lo, hi]."""
+    return max((-lo - 1).bit_length(), hi.bit_length()) + 1
+
+
+def _product_range(a: Format, b: Format) -> tuple[int, int]:
+    corners = [x * y for x in (a.min_raw, a.max_raw) for y in (b.min_raw, b.max_raw)]
+    return min(corners), max(corners)
+
+
+def _round_sum_plan(terms: list[tuple[int, int, int]], out: Format) -> dict[str, Any]:
+    """The adder of model.blocks.round_sum: terms (least raw, greatest raw, fraction bits) at
+    the largest fraction F (each term shifted left by F minus its own), the half-LSB added,
+    an arithmetic shift by F - out.frac_bits, then saturation into `out`. The sum's width holds
+    every reachable value and at least out.width + 1 bits after the shift, so saturation is a
+    test of the bits above out's sign bit."""
+    frac = max(f for _, _, f in terms)
+    shift = frac - out.frac_bits
+    if shift < 0:
+        raise ValueError(f"round_sum into {out}: the terms have fewer fraction bits ({frac})")
+    half = (1 << shift) >> 1
+    lo = sum(t_lo << (frac - f) for t_lo, _, f in terms)
+    hi = sum(t_hi << (frac - f) for _, t_hi, f in terms) + half
+    width = max(_signed_width(lo, hi), out.width + shift + 1)
+    return {"shifts": [frac - f for _, _, f in terms], "width": width, "round_shift": shift,
+            "half": half, "out_width": out.width, "fmt": str(out)}
+
+
+def sample_cond_context(cfg: Config) -> dict[str, Any]:
+    """x_i = mu_i + sum_{j<=i} L_ij e_j (model.blocks.sample_cond): one product per L entry
+    (stage 1), one rounded, saturated sum per component (stage 2)."""
+    dp = datapath(cfg)
+    n, noise = dp.n, dp.noise
+    pairs = [(i, j) for i in range(n) for j in range(i + 1)]      # L's row order
+    rows = []
+    for i in range(n):
+        x, chol = dp.x[i], dp.chol[i]
+        lo, hi = _product_range(chol, noise)
+        terms = [(x.min_raw, x.max_raw, x.frac_bits)]
+        terms += [(lo, hi, chol.frac_bits + noise.frac_bits)] * (i + 1)
+        rows.append({"x_width": x.width, "x_fmt": str(x), "chol_width": chol.width,
+                     "chol_fmt": str(chol), "prod_width": chol.width + noise.width,
+                     **_round_sum_plan(terms, x)})
+    mu_off = [sum(dp.x[k].width for k in range(i)) for i in range(n)]
+    mu_w = sum(f.width for f in dp.x)
+    chol_off = {}
+    offset = mu_w
+    for i, j in pairs:
+        chol_off[f"{i}_{j}"] = offset
+        offset += dp.chol[i].width
+    x_off = mu_off     # the output lane packs x like mu, then sat
+    return {
+        "lanes": cfg.lanes, "latency": 2, "n": n,
+        "noise_width": noise.width, "noise_fmt": str(noise),
+        "in_width": n * noise.width, "out_width": mu_w + 1, "x_width": mu_w,
+        "op_width": offset, "mu_width": mu_w, "chol_width": offset - mu_w,
+        "rows": rows, "mu_off": mu_off, "chol_off": chol_off, "x_off": x_off,
+    }
+
+
+def propagate_bot_context(cfg: Config) -> dict[str, Any]:
+    """p' = p + T v + a e, v' = v + b e per axis (model.blocks.propagate_bot): the constant
+    products (stage 1), one rounded, saturated sum per component (stage 2)."""
+    dp = datapath(cfg)
+    if len(set(dp.x)) != 1:
+        raise ValueError(f"propagate_bot: the state components have different formats {dp.x}")
+    x, noise, c = dp.x[0], dp.noise, dp.consts
+
+    def product(fmt: Format, name: str) -> tuple[int, int, int]:
+        corners = [v * c[name].raw for v in (fmt.min_raw, fmt.max_raw)]
+        return min(corners), max(corners), fmt.frac_bits + c[name].frac
+
+    whole = (x.min_raw, x.max_raw, x.frac_bits)
+    return {
+        "lanes": cfg.lanes, "latency": 2,
+        "x_width": x.width, "x_fmt": str(x), "noise_width": noise.width,
+        "noise_fmt": str(noise),
+        "in_width": 4 * x.width + 2 * noise.width, "out_width": 4 * x.width + 1,
+        # each constant in the fewest signed bits that hold it (18 at most: one DSP operand)
+        "consts": {k: {"raw": c[k].raw, "frac": c[k].frac, "value": c[k].value,
+                       "width": _signed_width(c[k].raw, c[k].raw)} for k in ("T", "a", "b")},
+        "p": _round_sum_plan([whole, product(x, "T"), product(noise, "a")], x),
+        "v": _round_sum_plan([whole, product(noise, "b")], x),
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -393,6 +479,10 @@ MODULES: dict[str, Module] = {
     "recip": Module("recip", ("recip_lane", "recip"), recip_context),
     "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
                             propagate_uav_context, apps=("uav",)),
+    "sample_cond": Module("sample_cond", ("sample_cond_lane", "sample_cond"),
+                          sample_cond_context),
+    "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
+                            propagate_bot_context, apps=("bot",)),
 }
 
 

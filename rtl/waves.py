@@ -18,8 +18,10 @@ from gpf.rtl.generate import (
     cordic_atan2_context,
     exp_context,
     grng_context,
+    propagate_bot_context,
     propagate_uav_context,
     recip_context,
+    sample_cond_context,
     sqrt_context,
 )
 from gpf.rtl.gtkw import Group, Trace, write_gtkw
@@ -223,10 +225,85 @@ def propagate_uav_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def _sat_bits(top: str, lanes: int, lane_width: int, offset: int) -> list[Trace]:
+    """Each lane's sat bit of the output stream."""
+    return [Trace(f"{top}.m_axis_tdata", lane_width * lane + offset, lane_width * lane + offset,
+                  label=f"lane{lane} sat") for lane in range(lanes)]
+
+
+def sample_cond_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = sample_cond_context(cfg)
+    n, ew, ow = dp.n, dp.noise.width, k["out_width"]
+    top, lane = "sample_cond", "sample_cond.g_lane[0].u_lane"
+    row = k["rows"][n - 1]
+    x_fields = [(f"x{i}", k["x_off"][i], dp.x[i].width, dp.x[i].frac_bits) for i in range(n)]
+    stream_out = _stream(top, "output x, sat", "m_axis", ow, cfg.lanes, x_fields, signed=True)
+    stream_out.traces.extend(_sat_bits(top, cfg.lanes, ow, k["x_width"]))
+    op = [Trace(f"{top}.op_beat", k["mu_off"][i] + dp.x[i].width - 1, k["mu_off"][i],
+                label=f"mu{i}", signed=True, frac_bits=dp.x[i].frac_bits) for i in range(n)]
+    op += [Trace(f"{top}.op_beat", k["chol_off"][f"{i}_{i}"] + dp.chol[i].width - 1,
+                 k["chol_off"][f"{i}_{i}"], label=f"L{i}{i}", signed=True,
+                 frac_bits=dp.chol[i].frac_bits) for i in range(n)]
+    pf = dp.chol[n - 1].frac_bits + dp.noise.frac_bits
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        _stream(top, f"input e ({dp.noise})", "s_axis", n * ew, cfg.lanes,
+                [(f"e{j}", j * ew, ew, dp.noise.frac_bits) for j in range(n)], signed=True),
+        Group("operands of the beat taken (mu, diagonal of L)",
+              [_bit(f"{top}.first_q", "first beat of a step")] + op),
+        stream_out,
+        Group(f"lane 0, component {n - 1}", [
+            Trace(f"{lane}.mu{n - 1}_q", dp.x[n - 1].width - 1, 0, label="mu", signed=True,
+                  frac_bits=dp.x[n - 1].frac_bits),
+            Trace(f"{lane}.p{n - 1}_{n - 1}_q", row["prod_width"] - 1, 0, label="L e (last)",
+                  signed=True, frac_bits=pf),
+            Trace(f"{lane}.x{n - 1}_sum", row["width"] - 1, 0, label="sum + half LSB",
+                  signed=True, frac_bits=pf),
+            _bit(f"{lane}.x{n - 1}_ovf", "saturates"),
+            Trace(f"{lane}.x{n - 1}_q", dp.x[n - 1].width - 1, 0, label="x", signed=True,
+                  frac_bits=dp.x[n - 1].frac_bits),
+        ]),
+    ]
+
+
+def propagate_bot_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = propagate_bot_context(cfg)
+    xw, ew, fx, fe = dp.x[0].width, dp.noise.width, dp.x[0].frac_bits, dp.noise.frac_bits
+    top, lane = "propagate_bot", "propagate_bot.g_lane[0].u_lane"
+    names = ("px", "vx", "py", "vy")
+    x_fields = [(name, i * xw, xw, fx) for i, name in enumerate(names)]
+    stream_out = _stream(top, "output x', sat", "m_axis", k["out_width"], cfg.lanes,
+                         x_fields, signed=True)
+    stream_out.traces.extend(_sat_bits(top, cfg.lanes, k["out_width"], 4 * xw))
+    pa = fe + k["consts"]["a"]["frac"]
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        _stream(top, f"input x ({dp.x[0]}), e ({dp.noise})", "s_axis", k["in_width"],
+                cfg.lanes, x_fields + [("ex", 4 * xw, ew, fe), ("ey", 4 * xw + ew, ew, fe)],
+                signed=True),
+        stream_out,
+        Group("lane 0, x axis", [
+            Trace(f"{lane}.p0_q", xw - 1, 0, label="p", signed=True, frac_bits=fx),
+            Trace(f"{lane}.tv0_q", xw + k["consts"]["T"]["width"] - 1, 0, label="T v",
+                  signed=True, frac_bits=fx + k["consts"]["T"]["frac"]),
+            Trace(f"{lane}.ea0_q", ew + k["consts"]["a"]["width"] - 1, 0, label="a e",
+                  signed=True, frac_bits=pa),
+            Trace(f"{lane}.pn0_sum", k["p"]["width"] - 1, 0, label="p sum + half LSB",
+                  signed=True, frac_bits=fx + k["p"]["round_shift"]),
+            _bit(f"{lane}.pn0_ovf", "p saturates"),
+            Trace(f"{lane}.pn0_q", xw - 1, 0, label="p'", signed=True, frac_bits=fx),
+            Trace(f"{lane}.vn0_q", xw - 1, 0, label="v'", signed=True, frac_bits=fx),
+        ]),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
 VIEWS.update(propagate_uav=propagate_uav_view)
+VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

@@ -28,6 +28,7 @@ class Bench:
     manifest: dict[str, Any]
     seed: int
     long: bool
+    short: bool = False   # TEST_LEVEL=short: mutant runs, a fifth of the default beats
 
     def rng(self, salt: str) -> random.Random:
         """An independent, replayable random stream for one purpose (stalls, stimulus, ...)."""
@@ -38,12 +39,12 @@ def bench() -> Bench:
     overrides = json.loads(os.environ.get("GPF_OVERRIDES", "{}"))
     cfg = load_config(os.environ["GPF_CONFIG"], overrides)
     manifest = json.loads(Path(os.environ["GPF_MANIFEST"]).read_text())
-    long = os.environ.get("TEST_LEVEL", "default") == "long"
+    level = os.environ.get("TEST_LEVEL", "default")
     # the run's seed as the user gave it (cocotb.RANDOM_SEED is re-mixed per test)
     seed = int(os.environ["COCOTB_RANDOM_SEED"])
     logging.getLogger("tb").info("SEED=%d (replay: make sim MODULE=%s CONFIG=%s SEED=%d)",
                                  seed, os.environ.get("GPF_MODULE", "?"), cfg.name, seed)
-    return Bench(cfg, manifest, seed, long)
+    return Bench(cfg, manifest, seed, level == "long", level == "short")
 
 
 async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = False) -> None:

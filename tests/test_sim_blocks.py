@@ -19,26 +19,40 @@ from gpf.toolchain import LZ4_HEADER, icarus_missing
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-SIMS = [
-    pytest.param("verilator", id="verilator"),
-    pytest.param("icarus", id="icarus", marks=pytest.mark.skipif(
-        icarus_missing() is not None, reason=icarus_missing() or "")),
-]
+SIM_MARKS = {"verilator": (), "icarus": pytest.mark.skipif(icarus_missing() is not None,
+                                                           reason=icarus_missing() or "")}
 
 
 def waves_possible(sim: str) -> bool:
     return sim == "icarus" or LZ4_HEADER.exists()
 
 
-MODULES = ["grng", "exp", "sqrt", "recip", "cordic_atan2"]
+APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}  # default, odd words
 
 
-@pytest.mark.parametrize("sim", SIMS)
-@pytest.mark.parametrize("config,lanes", [("bot", 1), ("bot", 2), ("odd", 1), ("odd", 2)])
-@pytest.mark.parametrize("module", MODULES)
+def block_runs() -> list:
+    """(module, sim, config, lanes) for every block: Verilator runs both configs of the block's
+    application at LANES 1 and 2, Icarus the default at 1 (with waves) and the odd one at 2; a
+    block of both applications also runs uav on each simulator."""
+    runs = []
+    for name, block in BLOCKS.items():
+        default, odd = APP_CONFIGS[block.apps[0]]
+        combos = [("verilator", default, 1), ("verilator", default, 2), ("verilator", odd, 1),
+                  ("verilator", odd, 2), ("icarus", default, 1), ("icarus", odd, 2)]
+        if len(block.apps) > 1:
+            combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 1)]
+        for sim, config, lanes in combos:
+            marks = SIM_MARKS[sim]
+            runs.append(pytest.param(name, sim, config, lanes, marks=marks,
+                                     id=f"{name}-{config}-lanes{lanes}-{sim}"))
+    return runs
+
+
+@pytest.mark.parametrize("module,sim,config,lanes", block_runs())
 def test_block(module: str, sim: str, config: str, lanes: int) -> None:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
-    waves = config == "bot" and lanes == 1 and waves_possible(sim)
+    waves = config == APP_CONFIGS[BLOCKS[module].apps[0]][0] and lanes == 1 and \
+        waves_possible(sim)
     result = run_sim(cfg, module, sim, waves=waves, seed=1000 + lanes,
                      log_file=Path("build") / cfg.name / f"{module}-{sim}.log")
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
@@ -86,6 +100,22 @@ MUTANTS = {
     "propagate_uav-operands": ("propagate_uav", "propagate_uav.sv.j2",
                                "assign op_beat = first_q ? op : op_hold_q;",
                                "assign op_beat = op_hold_q;"),
+    # operands sampled with the first beat after reset only: later steps use stale mu and L
+    "sample_cond-first-of-step": ("sample_cond", "sample_cond.sv.j2",
+                                  "first_q <= s_axis_tlast;", "first_q <= 1'b0;"),
+    # half an LSB minus one: only exact ties round differently (the corner test makes them)
+    "sample_cond-round-half": ("sample_cond", "_round_sum.sv.j2", "'sd{{ plan.half }}",
+                               "'sd{{ plan.half - 1 }}"),
+    "sample_cond-sat-any": ("sample_cond", "sample_cond_lane.sv.j2",
+                            "{% if not loop.last %} || {% endif %}",
+                            "{% if not loop.last %} && {% endif %}"),
+    # T for a in p' = p + T v + a e (a and b share their raw value: a = b dt / 2, dt = 1)
+    "propagate_bot-gain": ("propagate_bot", "propagate_bot_lane.sv.j2",
+                           "'(e{{ axis }}) * {{ ew + consts.a.width }}'(C_A);",
+                           "'(e{{ axis }}) * {{ ew + consts.a.width }}'(C_T);"),
+    "propagate_bot-sat-vy": ("propagate_bot", "propagate_bot_lane.sv.j2",
+                             "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf || vn1_ovf;",
+                             "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf;"),
 }
 
 
@@ -100,8 +130,9 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
     path.write_text(text.replace(old, new))
     config = "bot" if "bot" in BLOCKS[module].apps else "uav"   # the module's application
+    # TEST_LEVEL=short: each mutant was seen to fail at the default level too
     result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
-                     log_file=tmp_path / "sim.log")
+                     log_file=tmp_path / "sim.log", extra_env={"TEST_LEVEL": "short"})
     assert result.tests > 0
     assert result.failed > 0, f"mutant {mutant} survived the {module} testbench"
