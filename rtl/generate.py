@@ -18,8 +18,8 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
-from gpf.model.fixed import Format
 from gpf.model.blocks import cov_pairs, product_guard
+from gpf.model.fixed import Format
 from gpf.model.formats import INV_GUARD, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip

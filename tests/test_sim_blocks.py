@@ -75,6 +75,16 @@ MUTANTS = {
     "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
                            "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
+    "moments-reference": ("moments", "moments.sv.j2",
+                          "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) - {{ W + 1 }}'(ref{{ i }}_q);",
+                          "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) + {{ W + 1 }}'(ref{{ i }}_q);"),
+    # the mean's divider without its half-divisor bias: floor instead of round half up
+    "moments-mean-rounding": ("moments", "moments.sv.j2",
+                              "<< {{ s + 1 }}) + {{ d.nnw }}'(acc_w_q) +",
+                              "<< {{ s + 1 }}) + {{ d.nnw }}'(1'b0) +"),
+    "moments-zero-weights": ("moments", "moments.sv.j2",
+                             "assign mu_out{{ i }} = $unsigned(wzero ? ref",
+                             "assign mu_out{{ i }} = $unsigned(1'b0 ? ref"),
 }
 
 
