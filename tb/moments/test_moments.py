@@ -18,7 +18,7 @@ from gpf.model.fixed import Format, saturate
 from gpf.model.formats import Datapath, datapath
 from gpf.model.primitives import div_round
 from gpf.tb.harness import Bench, bench, start
-from gpf.tb.scoreboard import Field
+from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
     STEP,
     StreamBlock,
@@ -259,7 +259,6 @@ async def test_corners(dut: SimHandleBase) -> None:
     sb, _, out = await run_steps(dut, b, s, (0.2, 0.2), "moments-corners", blk)
     dut._log.info("%d corner steps: %s", len(s.w), sb.summary())
     sb.assert_clean()
-    from gpf.tb.scoreboard import unpack
     flags = unpack([beat.data for beat in out.beats], blk.fields_out, 1)["flags"][:, 0]
     assert (flags & 2).any() and (flags & 1).any() and not (flags & 4).any(), flags
 
