@@ -19,7 +19,7 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
-from gpf.model.blocks import _OMEGA_Q, _ROT
+from gpf.model.blocks import _OMEGA_Q, _ROT, cov_pairs, product_guard
 from gpf.model.fixed import Format
 from gpf.model.formats import CONST_WIDTH, INV_GUARD, datapath
 from gpf.model.formats import constants as datapath_constants
@@ -458,6 +458,91 @@ def propagate_bot_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def _sbits(bound: int) -> int:
+    """Signed width holding [-bound, bound]."""
+    return bound.bit_length() + 1
+
+
+def _div_params(num_w: int, den_w: int, shift: int, bound: int) -> dict[str, int]:
+    """A serial divider q = div_round(num, den, shift), |q| <= bound: QB quotient bits (one a
+    clock), the biased dividend N = 2 num 2^shift + den + 2^QB den (NNW bits, >= 0)."""
+    if shift < 0:
+        raise ValueError(f"moments: negative division shift {shift} (not generated)")
+    qb = _sbits(bound)
+    return {"num_w": num_w, "den_w": den_w, "shift": shift, "qb": qb,
+            "dw": den_w + 1, "nnw": den_w + 1 + qb}
+
+
+def moments_context(cfg: Config) -> dict[str, Any]:
+    """W = sum w, S1_i = sum w dx_i, S2_ij = sum p_i dx_j accumulated exactly at line rate, then
+    the model's finalise(): every division a serial restoring divider, all in parallel.
+
+    Widths are bounds over cfg.particles particles with any input (w up to the weight format's
+    maximum). Quotient bounds: S1_i / W and S2_ij / W are weighted means (w >= 0) of dx_i and
+    p_i dx_j / w, so |m_i| <= 2^(W-1+s); p = round(w dx 2^-k) adds at most N 2^(W-2) / W to
+    S2 / W when k > 0 (W >= 1 raw)."""
+    dp = datapath(cfg)
+    pairs = cov_pairs(dp, cfg.app_params.get("covariance", "full"))
+    word, n, nmax = dp.word, dp.n, cfg.particles
+    wmax, xmin = dp.weight.max_raw, -(1 << (word - 1))
+    guard = product_guard(dp)
+    k = dp.weight.frac_bits - guard                   # p = round(w dx 2^-k)
+    wdx_w = _sbits(wmax * -xmin)
+    p_max = (wmax * -xmin + (1 << k >> 1)) >> k
+    p_w = _sbits(p_max)
+    prod_w = _sbits(p_max * -xmin)
+    ws_w = (nmax * wmax).bit_length()                 # unsigned sum of weights
+    s1_w = _sbits(nmax * wmax * -xmin)
+    s2_w = _sbits(nmax * p_max * -xmin)
+    mean = []
+    for i in range(n):
+        s = dp.chol[i].frac_bits - dp.x[i].frac_bits
+        mean.append(_div_params(s1_w, ws_w, s, (1 << (word - 1 + s)) + 1))
+    sig = []
+    for i, j in pairs:
+        s = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits - dp.x[j].frac_bits
+             - guard)
+        err = nmax << (word - 2) if k else 0
+        bound = (((1 << (2 * word - 2 - k)) + err) << s) + 1 if k else (
+            (1 << (2 * word - 2 + s)) + 1)
+        d = _div_params(s2_w, ws_w, s, bound)
+        mm_w = mean[i]["qb"] + mean[j]["qb"]
+        d.update(i=i, j=j, mm_w=mm_w, v_w=max(d["qb"], mm_w) + 1,
+                 out_w=dp.sigma(i, j).width, fmt=str(dp.sigma(i, j)))
+        sig.append(d)
+    t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
+    t_sig = 1 + max(d["qb"] for d in sig)
+    t_load = max(t_sig, t_mean + 1)
+    ctx: dict[str, Any] = {"uav": dp.app == "uav"}
+    if dp.app == "uav":
+        fq = dp.x[0].frac_bits
+        g = dp.chol[0].frac_bits - fq
+        n2_w = 2 * word + 1                           # sum of 4 squares <= 2^(2W)
+        y_w = n2_w + 2 * g + 2                        # 4 X = norm2 2^(2g+2)
+        rb = (y_w + 1) // 2                           # root bits, one a clock
+        qbound = -(-(1 << (fq + g + 1)) // ((1 << (g + 1)) - 1)) + 1  # 2^fq / (1 - 2^-(g+1))
+        qd = _div_params(word, rb, fq + g, qbound)
+        t_sqrt = t_mean + 2                           # norm2 registered after mu
+        t_qdiv = t_sqrt + 1 + rb
+        t_load = max(t_load, t_qdiv + 1 + qd["qb"])
+        ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
+                   qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
+    acc_stages = 6                                    # input, dx, w dx, p dx, lane sums, acc
+    ctx.update({
+        "lanes": cfg.lanes, "n": n, "word": word, "ww": dp.weight.width,
+        "x_fmts": [str(f) for f in dp.x], "w_fmt": str(dp.weight),
+        "lane_w": n * word + dp.weight.width, "opw": n * word,
+        "out_w": n * word + sum(d["out_w"] for d in sig) + 3,
+        "pairs": [[i, j] for i, j in pairs], "npairs": len(pairs),
+        "guard": guard, "k": k, "wdx_w": wdx_w, "p_w": p_w, "prod_w": prod_w,
+        "ws_w": ws_w, "s1_w": s1_w, "s2_w": s2_w, "mean": mean, "sig": sig,
+        "particles": nmax, "t_mean": t_mean, "t_sig": t_sig, "t_load": t_load,
+        "t_w": max(1, (t_load + 1).bit_length()),
+        "latency": acc_stages + t_load + 1, "covariance": cfg.app_params.get("covariance", "full"),
+    })
+    return ctx
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -483,6 +568,7 @@ MODULES: dict[str, Module] = {
                           sample_cond_context),
     "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
                             propagate_bot_context, apps=("bot",)),
+    "moments": Module("moments", ("moments_div", "moments"), moments_context),
 }
 
 

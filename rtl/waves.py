@@ -18,6 +18,7 @@ from gpf.rtl.generate import (
     cordic_atan2_context,
     exp_context,
     grng_context,
+    moments_context,
     propagate_bot_context,
     propagate_uav_context,
     recip_context,
@@ -299,11 +300,50 @@ def propagate_bot_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def moments_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = moments_context(cfg)
+    top, word, n = scope(sim, "moments"), k["word"], k["n"]
+    xs = [(f"x{i}", i * word, word, dp.x[i].frac_bits) for i in range(n)]
+    sig, off = [], n * word
+    for d in k["sig"]:
+        sig.append(Trace(f"{top}.m_axis_tdata", off + d["out_w"] - 1, off, signed=True,
+                         label=f"Sigma{d['i']}{d['j']}", frac_bits=dp.cov_frac(d["i"], d["j"])))
+        off += d["out_w"]
+    inner = [_bit(f"{top}.busy_q", "busy (step taken, result pending)"),
+             _bit(f"{top}.fin_go_q", "sums complete"),
+             Trace(f"{top}.fin_c_q", k["t_w"] - 1, 0, label="finalise clock", frac_bits=0),
+             Trace(f"{top}.acc_w_q", k["ws_w"] - 1, 0, label="W = sum w",
+                   frac_bits=dp.weight.frac_bits),
+             Trace(f"{top}.acc_s1_0_q", k["s1_w"] - 1, 0, signed=True, label="S1_0",
+                   frac_bits=dp.weight.frac_bits + dp.x[0].frac_bits),
+             Trace(f"{top}.m0", k["mean"][0]["qb"] - 1, 0, signed=True, label="m_0",
+                   frac_bits=dp.chol[0].frac_bits)]
+    if k["uav"]:
+        inner += [Trace(f"{top}.norm2_q", k["n2_w"] - 1, 0, label="|q|^2",
+                        frac_bits=2 * dp.x[0].frac_bits),
+                  Trace(f"{top}.root_q", k["root_bits"] - 1, 0, label="isqrt", frac_bits=0)]
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        _stream(top, "input x, w", "s_axis", k["lane_w"], cfg.lanes,
+                xs + [("w", n * word, k["ww"], dp.weight.frac_bits)], signed=True),
+        Group("operands", [Trace(f"{top}.op", (i + 1) * word - 1, i * word, signed=True,
+                                 label=f"ref{i}", frac_bits=dp.x[i].frac_bits)
+                           for i in range(n)]),
+        _stream(top, "output mu", "m_axis", k["out_w"], 1,
+                [(f"mu{i}", i * word, word, dp.x[i].frac_bits) for i in range(n)], signed=True),
+        Group("output Sigma, flags", sig + [Trace(f"{top}.m_axis_tdata", off + 2, off,
+                                                  label="flags (ZERO_WEIGHTS, SAT)")]),
+        Group("accumulate and finalise", inner),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
 VIEWS.update(propagate_uav=propagate_uav_view)
 VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
+VIEWS.update(moments=moments_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

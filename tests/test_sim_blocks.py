@@ -116,6 +116,16 @@ MUTANTS = {
     "propagate_bot-sat-vy": ("propagate_bot", "propagate_bot_lane.sv.j2",
                              "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf || vn1_ovf;",
                              "sat_q <= pn0_ovf || vn0_ovf || pn1_ovf;"),
+    "moments-reference": ("moments", "moments.sv.j2",
+                          "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) - {{ W + 1 }}'(ref{{ i }}_q);",
+                          "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) + {{ W + 1 }}'(ref{{ i }}_q);"),
+    # the mean's divider without its half-divisor bias: floor instead of round half up
+    "moments-mean-rounding": ("moments", "moments.sv.j2",
+                              "<< {{ s + 1 }}) + {{ d.nnw }}'(acc_w_q) +",
+                              "<< {{ s + 1 }}) + {{ d.nnw }}'(1'b0) +"),
+    "moments-zero-weights": ("moments", "moments.sv.j2",
+                             "assign mu_out{{ i }} = $unsigned(wzero ? ref",
+                             "assign mu_out{{ i }} = $unsigned(1'b0 ? ref"),
 }
 
 

@@ -1,0 +1,305 @@
+"""cocotb testbench of `moments`: one result beat per step (mu, Sigma, flags) against the model's
+moments() (accumulate + finalise, + normalise_quaternion for uav), bit-exact.
+
+A step is built whole (its reference, its particles around it, its weights) so that particles are
+realistic: a spread around ref, weights 2^-t with t exponential, zeros now and then. The corner
+test adds the edges: all weights 0, one nonzero weight, all weights 1.0, x far from ref (dx
+saturates), 1-beat steps, a full step of cfg.particles particles with the extreme values that
+size the accumulators, Sigma near zero and (uav) tiny or zero quaternions."""
+
+from __future__ import annotations
+
+import cocotb
+import numpy as np
+from cocotb.handle import SimHandleBase
+
+from gpf.model.blocks import accumulate, cov_pairs, moments
+from gpf.model.fixed import Format, saturate
+from gpf.model.formats import Datapath, datapath
+from gpf.model.primitives import div_round
+from gpf.tb.harness import Bench, bench, start
+from gpf.tb.scoreboard import Field, unpack
+from gpf.tb.streaming import (
+    STEP,
+    StreamBlock,
+    check_latency_and_throughput,
+    idle_inputs,
+    random_beat_count,
+    run_stream,
+)
+
+FLAGS = Format(False, 3, 0)
+STALLS = [(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)]
+
+
+def pairs_of(b: Bench) -> list[tuple[int, int]]:
+    return cov_pairs(datapath(b.cfg), b.cfg.app_params.get("covariance", "full"))
+
+
+def sigma_name(i: int, j: int) -> str:
+    return f"s{i}_{j}"
+
+
+def step_particles(seen: dict[str, np.ndarray], rows: np.ndarray, n: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """x (N, n), w (N,) and ref (n,) of the beats `rows` (lanes flattened)."""
+    x = np.stack([seen[f"x{i}"][rows].reshape(-1) for i in range(n)], axis=1)
+    w = seen["w"][rows].reshape(-1)
+    ref = np.array([seen[f"ref{i}"][rows][0] for i in range(n)], dtype=np.int64)
+    return x, w, ref
+
+
+def without_mean_product(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
+                         pairs: list[tuple[int, int]], sigma: dict) -> dict:
+    """The corrupted model's Sigma: the second moment about ref, m_i m_j not subtracted."""
+    sums, _ = accumulate(dp, x, w, ref, pairs)
+    if sums.w == 0:
+        return sigma
+    m = [int(div_round(sums.s1[i], sums.w, dp.chol[i].frac_bits - dp.x[i].frac_bits))
+         for i in range(dp.n)]
+    return {(i, j): int(saturate(v + m[i] * m[j], dp.sigma(i, j))[0])
+            for (i, j), v in sigma.items()}
+
+
+def moments_model(b: Bench, corrupt: bool = False):
+    dp, pairs = datapath(b.cfg), pairs_of(b)
+
+    def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out: dict[str, list[int]] = {}
+        for s in np.unique(seen[STEP]):
+            x, w, ref = step_particles(seen, seen[STEP] == s, dp.n)
+            mu, sigma, flags = moments(dp, x, w, ref, pairs)
+            if corrupt:
+                sigma = without_mean_product(dp, x, w, ref, pairs, sigma)
+            values = {f"mu{i}": int(mu[i]) for i in range(dp.n)}
+            values |= {sigma_name(i, j): int(sigma[(i, j)]) for i, j in pairs}
+            values["flags"] = int(flags)
+            for k, v in values.items():
+                out.setdefault(k, []).append(v)
+        return {k: np.array(v, dtype=np.int64)[:, None] for k, v in out.items()}
+
+    return model
+
+
+def block(b: Bench, model=None) -> StreamBlock:
+    dp = datapath(b.cfg)
+    fields_in = [Field(f"x{i}", dp.x[i]) for i in range(dp.n)] + [Field("w", dp.weight)]
+    fields_op = [Field(f"ref{i}", dp.x[i]) for i in range(dp.n)]
+    fields_out = [Field(f"mu{i}", dp.x[i]) for i in range(dp.n)]
+    fields_out += [Field(sigma_name(i, j), dp.sigma(i, j)) for i, j in pairs_of(b)]
+    fields_out += [Field("flags", FLAGS)]
+    return StreamBlock("moments", fields_in, fields_out, b.cfg.lanes,
+                       b.manifest["modules"]["moments"]["latency"], model or moments_model(b),
+                       fields_op=fields_op, reduces=True)
+
+
+# ---- stimulus: whole steps -------------------------------------------------------------------
+
+class Steps:
+    """Steps collected into the kit's shapes: inputs (beats, lanes), lasts, ops (steps,)."""
+
+    def __init__(self, b: Bench):
+        self.dp = datapath(b.cfg)
+        self.lanes = b.cfg.lanes
+        self.max_beats = b.cfg.particles // b.cfg.lanes   # a step holds at most N particles
+        self.x: list[np.ndarray] = []
+        self.w: list[np.ndarray] = []
+        self.refs: list[np.ndarray] = []
+
+    def add(self, x: np.ndarray, w: np.ndarray, ref: np.ndarray) -> None:
+        """x (beats, lanes, n), w (beats, lanes), ref (n,), clipped to their formats."""
+        assert 1 <= len(w) <= self.max_beats
+        lo = np.array([f.min_raw for f in self.dp.x])
+        hi = np.array([f.max_raw for f in self.dp.x])
+        self.x.append(np.clip(np.asarray(x, dtype=np.int64), lo, hi))
+        self.w.append(np.clip(np.asarray(w, dtype=np.int64), 0, self.dp.weight.max_raw))
+        self.refs.append(np.clip(np.asarray(ref, dtype=np.int64), lo, hi))
+
+    def inputs(self) -> dict[str, np.ndarray]:
+        x = np.concatenate(self.x)
+        out = {f"x{i}": x[:, :, i] for i in range(self.dp.n)}
+        out["w"] = np.concatenate(self.w)
+        return out
+
+    def lasts(self) -> list[bool]:
+        return [k == len(w) - 1 for w in self.w for k in range(len(w))]
+
+    def ops(self) -> dict[str, np.ndarray]:
+        refs = np.array(self.refs)
+        return {f"ref{i}": refs[:, i] for i in range(self.dp.n)}
+
+
+def realistic_ref(dp: Datapath, rng: np.random.Generator) -> np.ndarray:
+    """bot: positions and velocities within half the range; uav: a unit quaternion (as raw)
+    and velocities within half the range."""
+    half = np.array([f.max_raw // 2 for f in dp.x])
+    ref = rng.integers(-half, half + 1)
+    if dp.app == "uav":
+        q = rng.normal(size=4)
+        ref[:4] = np.round(q / np.linalg.norm(q) * (1 << dp.x[0].frac_bits))
+    return ref
+
+
+def exp_weights(dp: Datapath, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """w = 2^-t, t exponential with a random scale (peaked or flat sets of weights), some 0."""
+    t = rng.exponential(rng.uniform(0.3, 12.0), size=shape)
+    w = np.floor(2.0 ** (dp.weight.frac_bits - t) + 0.5).astype(np.int64)
+    return np.where(rng.random(shape) < rng.choice([0.0, 0.05, 0.5]), 0, w)
+
+
+def realistic_step(s: Steps, rng: np.random.Generator, beats: int) -> None:
+    """Particles around ref (a per-component spread from a few LSB to 1/8 of the range; now
+    and then the whole cloud offset, so that mu moves away from ref), exp-like weights."""
+    dp = s.dp
+    ref = realistic_ref(dp, rng)
+    spread = 2.0 ** rng.uniform(1, dp.word - 4, size=dp.n)
+    offset = np.where(rng.random(dp.n) < 0.3, rng.normal(size=dp.n) * spread * 4, 0)
+    x = ref + offset + rng.normal(size=(beats, s.lanes, dp.n)) * spread
+    s.add(np.round(x), exp_weights(dp, rng, (beats, s.lanes)), ref)
+
+
+def step_lengths(rng: np.random.Generator, total: int, max_beats: int) -> list[int]:
+    """Random lengths (mostly about 64 beats, some single beats, some long) up to `total`."""
+    out: list[int] = []
+    while sum(out) < total:
+        kind = rng.random()
+        n = 1 if kind < 0.05 else int(rng.integers(100, 400)) if kind < 0.15 else int(
+            rng.geometric(1 / 64))
+        out.append(min(n, max_beats, total - sum(out)))
+    return out
+
+
+def random_steps(b: Bench, total: int, tag: str) -> Steps:
+    rng = np.random.default_rng(b.rng(tag).getrandbits(32))
+    s = Steps(b)
+    for beats in step_lengths(rng, total, s.max_beats):
+        realistic_step(s, rng, beats)
+    return s
+
+
+def corner_steps(b: Bench) -> Steps:
+    s = Steps(b)
+    dp, lanes, n = s.dp, s.lanes, s.dp.n
+    rng = np.random.default_rng(b.rng("moments-corners").getrandbits(32))
+    one = 1 << dp.weight.frac_bits
+    xmin = np.array([f.min_raw for f in dp.x])
+    xmax = np.array([f.max_raw for f in dp.x])
+
+    def around(beats: int, spread: float = 64.0) -> tuple[np.ndarray, np.ndarray]:
+        ref = realistic_ref(dp, rng)
+        return np.round(ref + rng.normal(size=(beats, lanes, n)) * spread), ref
+
+    x, ref = around(40)
+    s.add(x, np.zeros((40, lanes)), ref)                       # all weights 0
+    s.add(np.broadcast_to(xmin, (5, lanes, n)), np.zeros((5, lanes)), xmax)  # 0 and SAT
+    for w1 in (1, 7, one, dp.weight.max_raw):                  # a single nonzero weight
+        x, ref = around(30)
+        w = np.zeros((30, lanes), dtype=np.int64)
+        w[rng.integers(30), rng.integers(lanes)] = w1
+        s.add(x, w, ref)
+    x, ref = around(50, 3000.0)
+    s.add(x, np.full((50, lanes), one), ref)                   # all weights 1.0
+    x, ref = around(20, 3000.0)                                # far from ref: dx saturates
+    s.add(np.where(rng.random(x.shape) < 0.2, xmin, x), exp_weights(dp, rng, (20, lanes)),
+          np.where(rng.random(n) < 0.5, xmax, xmin))
+    for w1 in (0, 1, one, dp.weight.max_raw):                  # 1-beat steps
+        x, ref = around(1, 1000.0)
+        s.add(x, np.full((1, lanes), w1), ref)
+    for c in (0, 1, -3):                                       # Sigma (near) zero
+        x, ref = around(60)
+        x = np.broadcast_to(ref + c, x.shape) + (rng.random(x.shape) < 0.05)
+        s.add(x, exp_weights(dp, rng, (60, lanes)), ref)
+    full = s.max_beats                                         # the accumulators' widths
+    wmax = np.full((full, lanes), dp.weight.max_raw)
+    s.add(np.broadcast_to(xmin, (full, lanes, n)), wmax, xmax)  # dx = min everywhere
+    mixed = np.where(np.arange(n) % 2 == 0, xmin, xmax)         # dx_i dx_j most negative
+    s.add(np.broadcast_to(mixed, (full, lanes, n)), wmax, np.zeros(n))
+    s.add(np.broadcast_to(xmax, (full, lanes, n)), wmax, xmin)  # dx = max (saturated)
+    if dp.app == "uav":                                        # tiny and zero quaternions
+        for q in ([0, 0, 0, 0], [1, 0, 0, 0], [1, 1, 1, 0], [-1, 1, -1, 1], [0, 0, 0, -3]):
+            ref = realistic_ref(dp, rng)
+            ref[:4] = q
+            x = np.broadcast_to(ref, (3, lanes, n)).copy()
+            x[..., 4:] += rng.integers(-50, 51, size=(3, lanes, n - 4))
+            s.add(x, exp_weights(dp, rng, (3, lanes)) | 1, ref)
+    for _ in range(10):
+        realistic_step(s, rng, int(rng.integers(1, 80)))
+    return s
+
+
+# ---- tests -----------------------------------------------------------------------------------
+
+async def run_steps(dut: SimHandleBase, b: Bench, s: Steps, stalls: tuple[float, float],
+                    tag: str, blk: StreamBlock | None = None, expect_mismatch: bool = False):
+    idle_inputs(dut)
+    await start(dut)
+    return await run_stream(dut, blk or block(b), b, s.inputs(), s.lasts(), *stalls, tag,
+                            expect_mismatch=expect_mismatch, ops=s.ops())
+
+
+@cocotb.test()
+@cocotb.parametrize(stalls=STALLS)
+async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> None:
+    """Realistic steps of random length, random input gaps and output stalls: every mu, Sigma
+    and flag bit-exact."""
+    b = bench()
+    tag = f"moments-{stalls}"
+    s = random_steps(b, random_beat_count(b, stalls), tag)
+    sb, _, _ = await run_steps(dut, b, s, stalls, tag)
+    dut._log.info("stalls in/out %s, %d steps: %s", stalls, len(s.w), sb.summary())
+    sb.assert_clean()
+
+
+@cocotb.test()
+async def test_corners(dut: SimHandleBase) -> None:
+    """The corner steps (corner_steps); ZERO_WEIGHTS and SAT must both really occur."""
+    b = bench()
+    s = corner_steps(b)
+    blk = block(b)
+    sb, _, out = await run_steps(dut, b, s, (0.2, 0.2), "moments-corners", blk)
+    dut._log.info("%d corner steps: %s", len(s.w), sb.summary())
+    sb.assert_clean()
+    flags = unpack([beat.data for beat in out.beats], blk.fields_out, 1)["flags"][:, 0]
+    assert (flags & 2).any() and (flags & 1).any() and not (flags & 4).any(), flags
+
+
+@cocotb.test()
+async def test_latency_and_throughput(dut: SimHandleBase) -> None:
+    """Without stalls: one step of 500 beats at a beat a clock, its result LATENCY clocks after
+    the last beat."""
+    b = bench()
+    cache: dict[str, Steps] = {}
+
+    def steps(tag: str) -> Steps:
+        if tag not in cache:
+            rng = np.random.default_rng(b.rng(tag).getrandbits(32))
+            cache[tag] = Steps(b)
+            realistic_step(cache[tag], rng, 500)
+        return cache[tag]
+
+    await check_latency_and_throughput(
+        dut, block(b), b, lambda n, tag: steps(tag).inputs(), n=500,
+        operands=lambda n, tag: steps(tag).ops())
+
+
+@cocotb.test()
+async def test_back_to_back_steps(dut: SimHandleBase) -> None:
+    """Short steps with no gaps: each waits for the previous result, none is lost."""
+    b = bench()
+    rng = np.random.default_rng(b.rng("moments-b2b").getrandbits(32))
+    s = Steps(b)
+    for _ in range(40):
+        realistic_step(s, rng, int(rng.integers(1, 4)))
+    sb, _, _ = await run_steps(dut, b, s, (0.0, 0.0), "moments-b2b")
+    sb.assert_clean()
+
+
+@cocotb.test()
+async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
+    """Deliberately wrong model: Sigma about ref instead of about the mean (m_i m_j kept)."""
+    b = bench()
+    s = random_steps(b, 1_000, "moments-bad")
+    sb, _, _ = await run_steps(dut, b, s, (0.2, 0.2), "moments-bad",
+                               block(b, moments_model(b, corrupt=True)), expect_mismatch=True)
+    assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
+    dut._log.info("corrupted model caught: %s", sb.first_mismatch)
