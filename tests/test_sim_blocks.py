@@ -75,6 +75,18 @@ MUTANTS = {
     "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
                            "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
+    # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
+    "weight-bot-z-delay": ("weight_bot", "weight_bot.sv.j2", ".z      (zd_q[ZD*AW-1 -: AW]),",
+                           ".z      (zd_q[(ZD-1)*AW-1 -: AW]),"),
+    "weight-bot-x-delay": ("weight_bot", "weight_bot_lane.sv.j2",
+                           "assign x_out = xd_q[LAT*XW-1 -: XW];",
+                           "assign x_out = xd_q[(LAT-1)*XW-1 -: XW];"),
+    "weight-uav-whiten-round": ("weight_uav", "_weight.sv.j2", "PW'(1 <<< (S1-1))",
+                                "PW'(1 <<< S1)"),
+    # only the negative overflow flagged (the saturated value's sign is not observable: w = 0)
+    "weight-uav-sat-flag": ("weight_uav", "_weight.sv.j2",
+                            "{{ name }}_full[W] != {{ name }}_full[W-1];",
+                            "{{ name }}_full[W] && !{{ name }}_full[W-1];"),
 }
 
 
@@ -88,7 +100,9 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     text = path.read_text()
     assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
     path.write_text(text.replace(old, new))
-    result = run_sim(load_config("configs/bot.toml"), module, "icarus", seed=1,
+    from gpf.rtl.generate import MODULES as BLOCKS  # uav-only blocks run on the uav config
+    config = "configs/bot.toml" if "bot" in BLOCKS[module].apps else "configs/uav.toml"
+    result = run_sim(load_config(config), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
                      log_file=tmp_path / "sim.log")
     assert result.tests > 0
