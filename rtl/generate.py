@@ -543,6 +543,68 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     return ctx
 
 
+def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
+    """Whitening u = sat(round(d c_u)), exponent t = min(round(sum u^2), t max) and the exp
+    lane after them (model: blocks.whiten, exponent_from_u, Exp2Neg), for d in one word.
+
+    d is signed W bits with fraction d_frac (the same for every term); the product with the
+    18-bit constant is W + 18 bits, rounded by `whiten_shift`; u^2 is 2U bits (U = u's width),
+    the sum of K squares 2U + ceil(log2 K) bits plus one for the rounding carry.
+    """
+    dp = datapath(cfg)
+    c, u, t = dp.consts["c_u"], dp.u, dp.t
+    ex = exp_context(cfg)
+    if len(set(d_fracs)) != 1:
+        raise ValueError(f"weight: innovation terms with different fractions {d_fracs}")
+    whiten_shift = d_fracs[0] + c.frac - u.frac_bits
+    t_shift = 2 * u.frac_bits - t.frac_bits
+    if whiten_shift < 1 or t_shift < 1:
+        raise ValueError(f"weight: shifts {whiten_shift}, {t_shift} must be >= 1 (not generated)")
+    if (ex["in_width"], ex["out_width"]) != (t.width, dp.weight.width):
+        raise ValueError(f"weight: exp takes {ex['in_width']} bits, gives {ex['out_width']}")
+    terms = len(d_fracs)
+    sq_width = 2 * u.width
+    return {
+        "word": dp.word, "x_fmt": [str(f) for f in dp.x], "terms": terms,
+        "c_width": CONST_WIDTH, "c_u": f"{_twos(c.raw, CONST_WIDTH):X}", "c_u_real": c.real,
+        "c_frac": c.frac, "prod_width": dp.word + CONST_WIDTH,
+        "whiten_shift": whiten_shift, "u_width": u.width, "u_fmt": str(u),
+        "sq_width": sq_width, "sum_width": sq_width + (terms - 1).bit_length() + 1,
+        "t_shift": t_shift, "t_width": t.width, "t_fmt": str(t), "t_max": t.max_raw,
+        "w_width": dp.weight.width, "w_fmt": str(dp.weight),
+        # stages after the innovation d: product, u, squares, t; then the exp lane
+        "tail_latency": 4 + ex["latency"],
+    }
+
+
+def weight_bot_context(cfg: Config) -> dict[str, Any]:
+    """w = 2^-t, t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2 (model: blocks.weight_bot).
+
+    Stage 1 the saturating dx, dy; the CORDIC lane; stage A the wrapped difference d (W-bit
+    binary angles: the subtraction's natural wrap); then the whitening tail.
+    """
+    dp = datapath(cfg)
+    cordic = cordic_atan2_context(cfg)
+    if dp.cordic is None or dp.angle_frac != dp.word or cordic["out_width"] != dp.word:
+        raise ValueError("weight_bot: bearings must be one datapath word")
+    k = _whiten_context(cfg, [dp.angle_frac])
+    z_delay = 1 + cordic["latency"]   # z meets the CORDIC's angle in stage A
+    return {**k, "lanes": cfg.lanes, "angle_width": dp.angle_frac, "components": dp.n,
+            "z_delay": z_delay, "latency": z_delay + 1 + k["tail_latency"]}
+
+
+def weight_uav_context(cfg: Config) -> dict[str, Any]:
+    """w = 2^-t, t = sum_k ((v_gps,k - v_k) c_u)^2 (model: blocks.weight_uav): stage 1 the
+    saturating differences, then the whitening tail."""
+    dp = datapath(cfg)
+    vel = dp.x[4:7]
+    if dp.app != "uav" or len(set(vel)) != 1:
+        raise ValueError("weight_uav: needs the uav state with one velocity format")
+    k = _whiten_context(cfg, [f.frac_bits for f in vel])
+    return {**k, "lanes": cfg.lanes, "components": dp.n, "v_first": 4,
+            "latency": 1 + k["tail_latency"]}
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -569,6 +631,10 @@ MODULES: dict[str, Module] = {
     "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
                             propagate_bot_context, apps=("bot",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
+    "weight_bot": Module("weight_bot", ("weight_bot_lane", "weight_bot"), weight_bot_context,
+                         uses=("cordic_atan2", "exp"), apps=("bot",)),
+    "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
+                         uses=("exp",), apps=("uav",)),
 }
 
 

@@ -338,12 +338,87 @@ def moments_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def _weight_stream(top: str, cfg: Config, side: str) -> Group:
+    """A weight block's particles in or out (out: with w and sat beside each); the particle
+    fields signed, w and sat not (so _stream's one `signed` does not fit)."""
+    dp = datapath(cfg)
+    word, n = dp.word, dp.n
+    names = ["px", "vx", "py", "vy"] if dp.app == "bot" else ["q0", "q1", "q2", "q3", "vE",
+                                                              "vN", "vU"]
+    fields = [(name, word * i, word, dp.x[i].frac_bits, True) for i, name in enumerate(names)]
+    width = word * n
+    if side == "m_axis":
+        fields += [("w", width, dp.weight.width, dp.weight.frac_bits, False),
+                   ("sat", width + dp.weight.width, 1, None, False)]
+        width += dp.weight.width + 1
+    label = "input particles" if side == "s_axis" else f"output particles, w ({dp.weight}), sat"
+    return Group(label, [_bit(f"{top}.{side}_tvalid"), _bit(f"{top}.{side}_tready"),
+                         _bit(f"{top}.{side}_tlast")] + [
+        Trace(f"{top}.{side}_tdata", width * i + off + w - 1, width * i + off,
+              label=f"lane{i} {name}", signed=signed, frac_bits=frac)
+        for i in range(cfg.lanes) for name, off, w, frac, signed in fields])
+
+
+def _weight_tail(lane: str, cfg: Config, terms: int) -> list[Trace]:
+    dp = datapath(cfg)
+    return [Trace(f"{lane}.u{k}_q", dp.u.width - 1, 0, label=f"u{k} ({dp.u})", signed=True,
+                  frac_bits=dp.u.frac_bits) for k in range(terms)] + [
+        Trace(f"{lane}.t_q", dp.t.width - 1, 0, label=f"t ({dp.t})", frac_bits=dp.t.frac_bits),
+        Trace(f"{lane}.w", dp.weight.width - 1, 0, label="w", frac_bits=dp.weight.frac_bits)]
+
+
+def weight_bot_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    word, aw = dp.word, dp.angle_frac
+    top, lane = "weight_bot", "weight_bot.g_lane[0].u_lane"
+    frac = dp.x[0].frac_bits
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        Group("operands", [
+            Trace(f"{top}.op", aw - 1, 0, label="z (turns)", signed=True, frac_bits=aw),
+            Trace(f"{top}.op", aw + word - 1, aw, label="ox", signed=True, frac_bits=frac),
+            Trace(f"{top}.op", aw + 2 * word - 1, aw + word, label="oy", signed=True,
+                  frac_bits=frac),
+            _bit(f"{top}.first_q", "next beat starts a step")]),
+        _weight_stream(top, cfg, "s_axis"),
+        _weight_stream(top, cfg, "m_axis"),
+        Group("lane 0 pipeline", [
+            Trace(f"{lane}.dx_q", word - 1, 0, label="dx", signed=True, frac_bits=frac),
+            Trace(f"{lane}.dy_q", word - 1, 0, label="dy", signed=True, frac_bits=frac),
+            Trace(f"{lane}.theta", aw - 1, 0, label="theta (turns)", signed=True, frac_bits=aw),
+            Trace(f"{lane}.z", aw - 1, 0, label="z, stage A (turns)", signed=True,
+                  frac_bits=aw),
+            Trace(f"{lane}.d_q", aw - 1, 0, label="d = z - theta (turns)", signed=True,
+                  frac_bits=aw),
+        ] + _weight_tail(lane, cfg, 1)),
+    ]
+
+
+def weight_uav_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    word, fmt = dp.word, dp.x[4]
+    top, lane = "weight_uav", "weight_uav.g_lane[0].u_lane"
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        Group("operands", [
+            Trace(f"{top}.op", word * (k + 1) - 1, word * k, label=f"v_gps {name}", signed=True,
+                  frac_bits=fmt.frac_bits) for k, name in enumerate(("E", "N", "U"))] + [
+            _bit(f"{top}.first_q", "next beat starts a step")]),
+        _weight_stream(top, cfg, "s_axis"),
+        _weight_stream(top, cfg, "m_axis"),
+        Group("lane 0 pipeline", [
+            Trace(f"{lane}.dv{k}_q", word - 1, 0, label=f"dv{k}", signed=True,
+                  frac_bits=fmt.frac_bits) for k in range(3)] + _weight_tail(lane, cfg, 3)),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
 VIEWS.update(propagate_uav=propagate_uav_view)
 VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 VIEWS.update(moments=moments_view)
+VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

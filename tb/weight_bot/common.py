@@ -1,0 +1,86 @@
+"""What both weight testbenches share: the model run step by step (the operands are per step),
+each particle's `sat` found with the model function itself, and the corner runner."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from cocotb.handle import SimHandleBase
+
+from gpf.model.fixed import Format
+from gpf.tb.harness import Bench, start
+from gpf.tb.scoreboard import Field
+from gpf.tb.streaming import STEP, StreamBlock, idle_inputs, run_stream
+
+# (particles (rows, n), the step's operands) -> (raw weights (rows,), flags): the model block
+WeightFn = Callable[[np.ndarray, dict[str, int]], tuple[np.ndarray, int]]
+SAT = Field("sat", Format(False, 1, 0))
+
+
+def flagged_rows(fn: WeightFn, rows: np.ndarray, ops: dict[str, int], flags: int) -> np.ndarray:
+    """Which particles the model flags on their own (its flag is one bit per call): halve the
+    set while the model still flags it, so a few flagged rows cost a few dozen calls."""
+    out = np.zeros(len(rows), dtype=np.int64)
+    if not flags:
+        return out
+    if len(rows) == 1:
+        out[0] = 1
+        return out
+    half = len(rows) // 2
+    for part in (slice(0, half), slice(half, None)):
+        out[part] = flagged_rows(fn, rows[part], ops, fn(rows[part], ops)[1])
+    return out
+
+
+def step_model(fn: WeightFn, n: int, op_names: list[str]
+               ) -> Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]]:
+    """The StreamBlock model: each step's particles (every lane) through `fn` with the step's
+    operands; x0 .. x(n-1) passed through, w, and sat per particle."""
+
+    def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        steps = seen[STEP]
+        x = np.stack([seen[f"x{i}"] for i in range(n)], axis=-1)   # (beats, lanes, n)
+        beats, lanes = x.shape[:2]
+        w = np.zeros((beats, lanes), dtype=np.int64)
+        sat = np.zeros((beats, lanes), dtype=np.int64)
+        for s in np.unique(steps):
+            idx = np.nonzero(steps == s)[0]
+            rows = x[idx].reshape(-1, n)
+            ops = {k: int(seen[k][idx[0]]) for k in op_names}
+            weights, flags = fn(rows, ops)
+            w[idx] = np.asarray(weights, dtype=np.int64).reshape(len(idx), lanes)
+            sat[idx] = flagged_rows(fn, rows, ops, flags).reshape(len(idx), lanes)
+        return {**{f"x{i}": seen[f"x{i}"] for i in range(n)}, "w": w, "sat": sat}
+
+    return model
+
+
+async def run_steps(dut: SimHandleBase, blk: StreamBlock, b: Bench,
+                    steps: list[tuple[np.ndarray, dict[str, int]]], tag: str
+                    ) -> dict[str, np.ndarray]:
+    """Each step's particles (beats, lanes, n) with its operands through the block (bit-exact,
+    light stalls); returns the model's outputs (beats, lanes) for the caller's own checks."""
+    n = len(blk.fields_in)
+    x = np.concatenate([rows for rows, _ in steps])
+    lasts = []
+    for rows, _ in steps:
+        lasts += [False] * (len(rows) - 1) + [True]
+    ops = {f.name: np.array([o[f.name] for _, o in steps], dtype=np.int64)
+           for f in blk.fields_op}
+    inputs = {f"x{i}": x[:, :, i] for i in range(n)}
+    idle_inputs(dut)
+    await start(dut)
+    sb, _, _ = await run_stream(dut, blk, b, inputs, lasts, 0.2, 0.2, tag, ops=ops)
+    sb.assert_clean()
+    step_no = np.repeat(np.arange(len(steps)), [len(rows) for rows, _ in steps])
+    seen = dict(inputs, **{STEP: step_no}, **{k: v[step_no] for k, v in ops.items()})
+    return blk.model(seen)
+
+
+def spread_lanes(rows: np.ndarray, lanes: int) -> np.ndarray:
+    """(k, n) particles as (k, lanes, n) beats: lane l carries the rows rotated by l, so every
+    lane sees every particle."""
+    k = len(rows)
+    idx = (np.arange(k)[:, None] + np.arange(lanes)[None, :]) % k
+    return rows[idx]
