@@ -2,8 +2,10 @@
 
 All arrays hold raw integers (see formats.py for their formats). Line-rate blocks are vectorised
 over particles: x has shape (N, n). Every function returns a `flags` int of Flag bits (sticky
-status: OR them over a step). Rounding is half up, every overflow saturates and sets Flag.SAT,
-except where saturating is exact (an exponent past the weight's underflow).
+status: OR them over a step); the line-rate ones, given per_particle=True, return each
+particle's flags instead (an (N,) array: what the RTL's per-lane `sat` bit shows). Rounding is
+half up, every overflow saturates and sets Flag.SAT, except where saturating is exact (an
+exponent past the weight's underflow).
 """
 
 from __future__ import annotations
@@ -28,13 +30,28 @@ def _any(flag: np.ndarray | bool, bit: Flag) -> int:
     return int(bit) if np.any(flag) else 0
 
 
-def round_sum(terms: list[tuple[np.ndarray | int, int]], out: Format) -> tuple[np.ndarray, int]:
-    """Sum of exact terms (raw, frac), rounded once (half up) to `out` and saturated."""
+def _marks(flag: np.ndarray | bool, bit: Flag) -> np.ndarray:
+    """`bit` where `flag` is set, per element."""
+    return np.where(flag, np.int64(bit), np.int64(0))
+
+
+def _flags(marks: np.ndarray | int, n: int, per_particle: bool) -> np.ndarray | int:
+    """A line-rate block's flags: per particle, or ORed over all n particles."""
+    each = np.broadcast_to(np.asarray(marks, dtype=np.int64), (n,))
+    if per_particle:
+        return each.copy()
+    return int(np.bitwise_or.reduce(each)) if n else 0
+
+
+def round_sum(terms: list[tuple[np.ndarray | int, int]], out: Format
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Sum of exact terms (raw, frac), rounded once (half up) to `out` and saturated; the
+    Flag.SAT marks per element."""
     frac = max(f for _, f in terms)
     total = sum(np.asarray(raw, dtype=np.int64) << (frac - f) for raw, f in terms)
     rounded = shift_round(total, frac - out.frac_bits, "half_up", width=62)
     raw, flag = saturate(rounded, out)
-    return raw, _any(flag, Flag.SAT)
+    return raw, _marks(flag, Flag.SAT)
 
 
 def cmul(raw: np.ndarray, frac: int, c: Const) -> tuple[np.ndarray, int]:
@@ -43,8 +60,8 @@ def cmul(raw: np.ndarray, frac: int, c: Const) -> tuple[np.ndarray, int]:
 
 
 # ---- sample_cond -----------------------------------------------------------------------------
-def sample_cond(dp: Datapath, mu: np.ndarray, chol: np.ndarray, e: np.ndarray
-                ) -> tuple[np.ndarray, int]:
+def sample_cond(dp: Datapath, mu: np.ndarray, chol: np.ndarray, e: np.ndarray,
+                per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
     """x_i = mu_i + sum_{j<=i} L_ij e_j, one rounding per component. mu (n,), L (n, n), e (N, n)."""
     out = np.empty(e.shape, dtype=np.int64)
     flags = 0
@@ -54,11 +71,12 @@ def sample_cond(dp: Datapath, mu: np.ndarray, chol: np.ndarray, e: np.ndarray
                   for j in range(i + 1)]
         out[:, i], f = round_sum(terms, dp.x[i])
         flags |= f
-    return out, flags
+    return out, _flags(flags, len(e), per_particle)
 
 
 # ---- propagate -------------------------------------------------------------------------------
-def propagate_bot(dp: Datapath, x: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, int]:
+def propagate_bot(dp: Datapath, x: np.ndarray, e: np.ndarray, per_particle: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | int]:
     """p' = p + T v + a e, v' = v + b e per axis (x: [px, vx, py, vy], e: (N, 2) draws)."""
     c = dp.consts
     fx = dp.x[0].frac_bits
@@ -72,7 +90,7 @@ def propagate_bot(dp: Datapath, x: np.ndarray, e: np.ndarray) -> tuple[np.ndarra
         out[:, 2 * axis + 1], f2 = round_sum([(v, fx), cmul(draw, fe, c["b"])],
                                              dp.x[2 * axis + 1])
         flags |= f1 | f2
-    return out, flags
+    return out, _flags(flags, len(x), per_particle)
 
 
 # uav: q' = q + (dt/2) Omega(omega') q; rows of Omega(w) q as (sign, k of w, j of q) triples
@@ -93,14 +111,15 @@ _ROT = (
 )
 
 
-def _sat_word(raw: np.ndarray, width: int) -> tuple[np.ndarray, int]:
+def _sat_word(raw: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Saturate into `width` signed bits, whatever the binary point."""
     out, flag = saturate(raw, Format(True, 0, width - 1))
-    return out, _any(flag, Flag.SAT)
+    return out, _marks(flag, Flag.SAT)
 
 
 def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
-                  accel: np.ndarray) -> tuple[np.ndarray, int]:
+                  accel: np.ndarray, per_particle: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | int]:
     """Attitude and velocity, one IMU period. x: (N, 7) [q0..q3, vE, vN, vU]; e: (N, 6) draws
     [gyro x3, accel x3]; omega, accel: raw inputs in dp.gyro, dp.accel.
 
@@ -141,7 +160,7 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
         out[:, 4 + n], f2 = round_sum([(x[:, 4 + n], dp.x[4 + n].frac_bits),
                                        cmul(f_n, fa, c["dt"])], dp.x[4 + n])
         flags |= f1 | f2
-    return out, flags
+    return out, _flags(flags, len(x), per_particle)
 
 
 # ---- weight ----------------------------------------------------------------------------------
@@ -166,26 +185,27 @@ def wrap_angle(raw: np.ndarray, frac: int) -> np.ndarray:
     return ((raw + half) % (1 << frac)) - half
 
 
-def weight_bot(dp: Datapath, x: np.ndarray, z: int, obs: tuple[int, int]
-               ) -> tuple[np.ndarray, int]:
+def weight_bot(dp: Datapath, x: np.ndarray, z: int, obs: tuple[int, int],
+               per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
     """w = 2^-t, t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2; z and atan2 in turns."""
     dx, f1 = saturate(x[:, 0] - obs[0], dp.x[0])
     dy, f2 = saturate(x[:, 2] - obs[1], dp.x[2])
     theta = dp.cordic.atan2(dy, dx)
     d = wrap_angle(np.int64(z) - theta, dp.angle_frac)
     t = exponent_from_u(dp, [whiten(dp, d, dp.angle_frac)])
-    return dp.exp2(t), _any(f1, Flag.SAT) | _any(f2, Flag.SAT)
+    return dp.exp2(t), _flags(_marks(f1 | f2, Flag.SAT), len(x), per_particle)
 
 
-def weight_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray) -> tuple[np.ndarray, int]:
+def weight_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray, per_particle: bool = False
+               ) -> tuple[np.ndarray, np.ndarray | int]:
     """w = 2^-t, t = sum_k ((v_gps,k - v_k) c_u)^2 over the 3 velocity components."""
     flags, us = 0, []
     for k in range(3):
         fmt = dp.x[4 + k]
         dv, f = saturate(np.int64(v_gps[k]) - x[:, 4 + k], fmt)
-        flags |= _any(f, Flag.SAT)
+        flags |= _marks(f, Flag.SAT)
         us.append(whiten(dp, dv, fmt.frac_bits))
-    return dp.exp2(exponent_from_u(dp, us)), flags
+    return dp.exp2(exponent_from_u(dp, us)), _flags(flags, len(x), per_particle)
 
 
 # ---- moments ---------------------------------------------------------------------------------

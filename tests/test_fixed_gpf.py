@@ -201,3 +201,44 @@ def test_uav_filter_runs_with_flags_predicted() -> None:
     assert np.all(np.isfinite(out.mu))
     q = out.mu[1:, :4]
     assert np.allclose(np.linalg.norm(q, axis=1), 1, atol=1e-5)
+
+
+def _line_rate_calls(rng: np.random.Generator) -> list:
+    """(name, call(x rows, per_particle)) for every line-rate block, on inputs where about
+    half the particles saturate somewhere (full-range states and draws)."""
+    bot, uav = datapath(BOT), datapath(UAV)
+
+    def full(dp, shape):
+        return rng.integers(dp.x[0].min_raw, dp.x[0].max_raw + 1, size=shape)
+
+    e_bot = rng.integers(bot.noise.min_raw, bot.noise.max_raw + 1, size=(64, 6))
+    e_uav = rng.integers(uav.noise.min_raw, uav.noise.max_raw + 1, size=(64, 13))
+    x_bot, x_uav = full(bot, (64, 4)), full(uav, (64, 7))
+    mu = full(bot, 4)
+    chol = np.tril(rng.integers(bot.chol[0].min_raw, bot.chol[0].max_raw + 1, size=(4, 4)))
+    omega = rng.integers(uav.gyro.min_raw, uav.gyro.max_raw + 1, size=3)
+    accel = rng.integers(uav.accel.min_raw, uav.accel.max_raw + 1, size=3)
+    return [
+        ("sample_cond", lambda r, p: blocks.sample_cond(bot, mu, chol, e_bot[r, :4], p)),
+        ("propagate_bot", lambda r, p: blocks.propagate_bot(bot, x_bot[r], e_bot[r, 4:], p)),
+        ("propagate_uav", lambda r, p: blocks.propagate_uav(uav, x_uav[r], e_uav[r, :6], omega,
+                                                            accel, p)),
+        ("weight_bot", lambda r, p: blocks.weight_bot(bot, x_bot[r], 1000, (int(mu[0]),
+                                                                             int(mu[2])), p)),
+        ("weight_uav", lambda r, p: blocks.weight_uav(uav, x_uav[r], x_uav[0, 4:], p)),
+    ]
+
+
+@pytest.mark.parametrize("index", range(5))
+def test_per_particle_flags_are_each_particle_alone(index: int) -> None:
+    """per_particle=True gives, for every particle, the flags of that particle on its own,
+    and ORed they are the block's flags."""
+    name, call = _line_rate_calls(np.random.default_rng(index))[index]
+    rows = np.arange(64)
+    out, each = call(rows, True)
+    out_all, flags = call(rows, False)
+    assert np.array_equal(out, out_all)
+    alone = [call(np.array([r]), False)[1] for r in rows]
+    assert list(each) == alone, name
+    assert int(np.bitwise_or.reduce(each)) == flags
+    assert 0 < np.count_nonzero(each) < 64, f"{name}: stimulus must flag some, not all"

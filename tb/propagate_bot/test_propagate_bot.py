@@ -8,11 +8,10 @@ import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
 
-from gpf.model.blocks import propagate_bot
+from gpf.model.blocks import Flag, propagate_bot
 from gpf.model.fixed import Format
 from gpf.model.formats import Datapath, datapath
 from gpf.tb.harness import Bench, bench, start
-from gpf.tb.rowflags import sat_per_row
 from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
     Inputs,
@@ -27,14 +26,14 @@ SAT = Format(False, 1, 0)
 
 
 def propagate_model(dp: Datapath):
-    """propagate_bot over every beat and lane; sat per particle (sat_per_row)."""
+    """propagate_bot over every beat and lane; sat per particle."""
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         beats, lanes = seen["x0"].shape
         x = np.stack([seen[f"x{i}"] for i in range(4)], axis=-1).reshape(-1, 4)
         e = np.stack([seen[f"e{j}"] for j in range(2)], axis=-1).reshape(-1, 2)
-        out, _ = propagate_bot(dp, x, e)
-        sat = sat_per_row(out, dp.x, lambda r: propagate_bot(dp, x[r:r + 1], e[r:r + 1])[1])
+        out, flags = propagate_bot(dp, x, e, per_particle=True)
+        sat = (flags & Flag.SAT != 0).astype(np.int64)
         out = out.reshape(beats, lanes, 4)
         return {**{f"x{i}": out[:, :, i] for i in range(4)}, "sat": sat.reshape(beats, lanes)}
 

@@ -7,11 +7,10 @@ import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
 
-from gpf.model.blocks import cholesky, cov_pairs, sample_cond
+from gpf.model.blocks import Flag, cholesky, cov_pairs, sample_cond
 from gpf.model.fixed import Format
 from gpf.model.formats import Datapath, datapath
 from gpf.tb.harness import Bench, bench, start
-from gpf.tb.rowflags import sat_per_row
 from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
     STEP,
@@ -52,7 +51,7 @@ def step_operands(seen: dict[str, np.ndarray], n: int, beat: int) -> tuple[np.nd
 
 
 def sample_model(dp: Datapath):
-    """Per step: sample_cond over all its beats and lanes; sat per particle (sat_per_row)."""
+    """Per step: sample_cond over all its beats and lanes; sat per particle."""
     n = dp.n
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -65,10 +64,9 @@ def sample_model(dp: Datapath):
             rows = steps == s
             mu, chol = step_operands(seen, n, int(np.argmax(rows)))
             flat = e[rows].reshape(-1, n)
-            out, _ = sample_cond(dp, mu, chol, flat)
+            out, flags = sample_cond(dp, mu, chol, flat, per_particle=True)
             x[rows] = out.reshape(-1, lanes, n)
-            sat[rows] = sat_per_row(out, dp.x, lambda r, mu=mu, chol=chol, flat=flat: (
-                sample_cond(dp, mu, chol, flat[r:r + 1])[1])).reshape(-1, lanes)
+            sat[rows] = (flags & Flag.SAT != 0).reshape(-1, lanes)
         return {**{f"x{i}": x[:, :, i] for i in range(n)}, "sat": sat}
 
     return model

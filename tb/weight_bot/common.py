@@ -1,5 +1,5 @@
-"""What both weight testbenches share: the model run step by step (the operands are per step),
-each particle's `sat` found with the model function itself, and the corner runner."""
+"""What both weight testbenches share: the model run step by step (the operands are per step)
+with each particle's flags, and the corner runner."""
 
 from __future__ import annotations
 
@@ -8,29 +8,16 @@ from collections.abc import Callable
 import numpy as np
 from cocotb.handle import SimHandleBase
 
+from gpf.model.blocks import Flag
 from gpf.model.fixed import Format
 from gpf.tb.harness import Bench, start
 from gpf.tb.scoreboard import Field
 from gpf.tb.streaming import STEP, StreamBlock, idle_inputs, run_stream
 
-# (particles (rows, n), the step's operands) -> (raw weights (rows,), flags): the model block
-WeightFn = Callable[[np.ndarray, dict[str, int]], tuple[np.ndarray, int]]
+# (particles (rows, n), the step's operands) -> (raw weights (rows,), flags per particle (rows,)):
+# the model block with per_particle=True
+WeightFn = Callable[[np.ndarray, dict[str, int]], tuple[np.ndarray, np.ndarray]]
 SAT = Field("sat", Format(False, 1, 0))
-
-
-def flagged_rows(fn: WeightFn, rows: np.ndarray, ops: dict[str, int], flags: int) -> np.ndarray:
-    """Which particles the model flags on their own (its flag is one bit per call): halve the
-    set while the model still flags it, so a few flagged rows cost a few dozen calls."""
-    out = np.zeros(len(rows), dtype=np.int64)
-    if not flags:
-        return out
-    if len(rows) == 1:
-        out[0] = 1
-        return out
-    half = len(rows) // 2
-    for part in (slice(0, half), slice(half, None)):
-        out[part] = flagged_rows(fn, rows[part], ops, fn(rows[part], ops)[1])
-    return out
 
 
 def step_model(fn: WeightFn, n: int, op_names: list[str]
@@ -50,7 +37,7 @@ def step_model(fn: WeightFn, n: int, op_names: list[str]
             ops = {k: int(seen[k][idx[0]]) for k in op_names}
             weights, flags = fn(rows, ops)
             w[idx] = np.asarray(weights, dtype=np.int64).reshape(len(idx), lanes)
-            sat[idx] = flagged_rows(fn, rows, ops, flags).reshape(len(idx), lanes)
+            sat[idx] = (flags & Flag.SAT != 0).reshape(len(idx), lanes)
         return {**{f"x{i}": seen[f"x{i}"] for i in range(n)}, "w": w, "sat": sat}
 
     return model

@@ -35,8 +35,8 @@ def block(b: Bench, dp: Datapath | None = None) -> StreamBlock:
     assert (k["word"], k["angle_width"], k["w_width"]) == (dp.word, dp.angle_frac,
                                                            dp.weight.width), k
 
-    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, int]:
-        return weight_bot(dp, rows, ops["z"], (ops["ox"], ops["oy"]))
+    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        return weight_bot(dp, rows, ops["z"], (ops["ox"], ops["oy"]), per_particle=True)
 
     xs = [Field(f"x{i}", dp.x[i]) for i in range(N)]
     return StreamBlock(

@@ -35,8 +35,9 @@ def block(b: Bench, dp: Datapath | None = None) -> StreamBlock:
     k = b.manifest["modules"]["weight_uav"]["constants"]
     assert (k["word"], k["w_width"], k["terms"]) == (dp.word, dp.weight.width, 3), k
 
-    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, int]:
-        return weight_uav(dp, rows, np.array([ops[name] for name in OPS], dtype=np.int64))
+    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        return weight_uav(dp, rows, np.array([ops[name] for name in OPS], dtype=np.int64),
+                          per_particle=True)
 
     xs = [Field(f"x{i}", dp.x[i]) for i in range(N)]
     return StreamBlock(
