@@ -179,3 +179,18 @@ async def check_latency_and_throughput(dut: SimHandleBase, block: StreamBlock, b
     span = mon_out.beats[-1].cycle - first_in + 1
     due = (n - 1) * block.interval + 1 + block.latency
     assert span == due, f"{n} beats took {span} clocks, expected {due}"
+
+
+async def check_corrupted_model_is_caught(dut: SimHandleBase, block: StreamBlock, b: Bench,
+                                          inputs: Inputs, operands: Operands | None = None,
+                                          n: int = 1_000, every: int = 50) -> None:
+    """`block` carries a deliberately wrong model: the scoreboard must report a mismatch (the
+    test that shows the scoreboard can fail)."""
+    lasts = ([False] * (every - 1) + [True]) * (n // every)
+    ops = operands(sum(lasts), "bad") if operands else None
+    idle_inputs(dut)
+    await start(dut)
+    sb, _, _ = await run_stream(dut, block, b, inputs(len(lasts), "bad"), lasts, 0.2, 0.2,
+                                f"{block.name}-bad", expect_mismatch=True, ops=ops)
+    assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
+    dut._log.info("corrupted model caught: %s", sb.first_mismatch)
