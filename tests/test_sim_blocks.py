@@ -75,6 +75,12 @@ MUTANTS = {
     "cordic-prerotation": ("cordic_atan2", "cordic_atan2_lane.sv.j2",
                            "(y[IW-1] ? MINUS_QUARTER : QUARTER)",
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
+    "cholesky-floor-compare": ("cholesky", "cholesky.sv.j2", "assign floored = dot < floor_v;",
+                               "assign floored = dot <= floor_v;"),
+    "cholesky-recip-rounding": ("cholesky", "cholesky.sv.j2",
+                                "+ {{ qw + 1 }}'d1) >> 1);", "+ {{ qw + 1 }}'d0) >> 1);"),
+    "cholesky-pivot-sub": ("cholesky", "cholesky.sv.j2",
+                           "if (kk < int'(j_q)) dot = dot - ", "if (kk < int'(j_q)) dot = dot + "),
 }
 
 
