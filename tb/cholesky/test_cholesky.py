@@ -76,13 +76,13 @@ def to_raw(b: Bench, sigma: np.ndarray) -> dict[tuple[int, int], int]:
 
 
 def scales(b: Bench, rng: np.random.Generator, kind: str) -> np.ndarray:
-    """Per-component standard deviations: around the config's sigma0 (times 10^+-2), or
-    log-uniform over the whole range of the state formats."""
+    """Per-component standard deviations: around the config's sigma0 (times 10^-1 .. 10^2), or
+    log-uniform from 2^5 LSB of L (below that most pivots floor) to the format's top."""
     dp = datapath(b.cfg)
     if kind == "realistic":
         sd0 = np.sqrt(np.asarray(b.cfg.app_params["sigma0_diag"], dtype=float))
-        return sd0 * 10.0 ** rng.uniform(-2, 2, dp.n)
-    lo = np.array([-f.frac_bits for f in dp.chol], dtype=float)
+        return sd0 * 10.0 ** rng.uniform(-1, 2, dp.n)
+    lo = np.array([5 - f.frac_bits for f in dp.chol], dtype=float)
     hi = np.array([f.int_bits + 1 for f in dp.chol], dtype=float)
     return 2.0 ** rng.uniform(lo, hi)
 
@@ -120,21 +120,23 @@ def random_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], in
 
 
 def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]:
-    """Diagonal raw values around the absolute floor (CHOL_FLOOR_LSB^2 LSB^2), and pivots at
-    the relative floor (Sigma_jj 2^-CHOL_FLOOR_REL_BITS) through near-perfect correlation."""
+    """Pivots at a floor's edge (within a few LSB^2): a diagonal entry at the absolute floor
+    CHOL_FLOOR_LSB^2, or (half the time) a pair a, a+1 with L_aa = x, L_(a+1)a = y exactly
+    (Sigma_aa = x^2, Sigma_(a+1)a = x y, |x|, |y| < 2^15 so the rounded 1/x gives y back) and
+    Sigma_(a+1)(a+1) = y^2 + (y^2 >> REL) + delta: a pivot at the relative floor."""
     dp, pairs = datapath(b.cfg), cholesky_pairs(b.cfg)
     fl = CHOL_FLOOR_LSB**2
     raw = {p: 0 for p in pairs}
     for j in range(dp.n):
-        raw[(j, j)] = int(fl + rng.integers(-3, 4))
-    if rng.random() < 0.5:   # a pair (a, a+1) with Sigma_aa = s, Sigma_ba = c, Sigma_bb = c^2/s + d
-        a = int(rng.integers(dp.n - 1))
-        if (a + 1, a) in raw:
-            s = int(rng.integers(1 << 20, 1 << 30))
-            c = int(rng.integers(1 << 18, s))
-            d = int(((c * c) // s) >> CHOL_FLOOR_REL_BITS) + int(rng.integers(-2, 3))
-            raw[(a, a)], raw[(a + 1, a)] = s, c
-            raw[(a + 1, a + 1)] = (c * c) // s + max(d, 0)
+        raw[(j, j)] = fl + int(rng.integers(0, 1 << 12))
+    edge = int(rng.integers(dp.n))
+    raw[(edge, edge)] = fl + int(rng.integers(-2, 3))
+    a = int(rng.integers(dp.n - 1))
+    if rng.random() < 0.5 and (a + 1, a) in raw:
+        x, y = int(rng.integers(1 << 8, 1 << 15)), int(rng.integers(1 << 12, 1 << 15))
+        y *= int(rng.choice([-1, 1]))
+        raw[(a, a)], raw[(a + 1, a)] = x * x, x * y
+        raw[(a + 1, a + 1)] = y * y + ((y * y) >> CHOL_FLOOR_REL_BITS) + int(rng.integers(-2, 3))
     return {p: min(max(v, dp.sigma(*p).min_raw), dp.sigma(*p).max_raw) for p, v in raw.items()}
 
 
