@@ -21,6 +21,7 @@ from gpf.tb.streaming import (
     Inputs,
     StreamBlock,
     check_latency_and_throughput,
+    check_random_beats,
     idle_inputs,
     run_stream,
 )
@@ -192,28 +193,14 @@ def corner_sigmas(b: Bench) -> list[dict[tuple[int, int], int]]:
     return mats
 
 
-def matrix_count(b: Bench, stalls: tuple[float, float]) -> int:
-    """Matrices per stall shape. Each beat is a whole matrix and takes INTERVAL (43 .. 106)
-    clocks, so the kit's 10,000 beats (check_random_beats) would be 0.5 - 1.5 million clocks
-    per shape, most of an hour per run under cocotb: 10,000 only at TEST_LEVEL=long."""
-    if b.long:
-        return 10_000 if stalls == (0.3, 0.3) else 2_000
-    return 1_000 if stalls == (0.3, 0.3) else 200
-
-
 @cocotb.test()
 @cocotb.parametrize(stalls=[(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)])
 async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> None:
     """Random matrices (one per beat, tlast on every beat) with random input gaps and output
-    stalls: every L_ij and the flags bit-exact (check_random_beats with fewer beats)."""
+    stalls: every L_ij and the flags bit-exact."""
     b = bench()
-    blk = block(b)
-    n, tag = matrix_count(b, stalls), f"cholesky-{stalls}"
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, _ = await run_stream(dut, blk, b, random_inputs(b)(n, tag), [True] * n, *stalls, tag)
-    dut._log.info("stalls in/out %s, %d matrices: %s", stalls, n, sb.summary())
-    sb.assert_clean()
+    # every=1: tlast on every beat (a step is one matrix); 10,000 matrices in the main shape
+    await check_random_beats(dut, block(b), b, random_inputs(b), stalls, every=1)
 
 
 @cocotb.test()
