@@ -38,6 +38,7 @@ class Module:
     context: Callable[[Config], dict[str, Any]]
     uses: tuple[str, ...] = ()
     apps: tuple[str, ...] = ("bot", "uav")   # the applications whose filter has this block
+    laned: bool = True    # False: one lane whatever LANES (a serial block)
 
     def files(self) -> list[str]:
         """Its SystemVerilog files, dependencies first: used modules' parts but their tops."""
@@ -605,6 +606,68 @@ def weight_uav_context(cfg: Config) -> dict[str, Any]:
             "latency": 1 + k["tail_latency"]}
 
 
+def cholesky_pairs(cfg: Config) -> list[tuple[int, int]]:
+    """The Sigma entries the Cholesky reads (input beat order): cov_pairs of the config."""
+    from gpf.model.blocks import cov_pairs
+
+    return cov_pairs(datapath(cfg), cfg.app_params.get("covariance", "full"))
+
+
+CHOL_DIGITS = 8   # root digits and quotient bits per clock in the Cholesky
+
+
+def cholesky_context(cfg: Config) -> dict[str, Any]:
+    """Serial L = chol(Sigma) (model: gpf.model.blocks.cholesky), one matrix per beat.
+
+    Column j runs a fixed schedule of clocks (counter c): c = 0 the pivot d = Sigma_jj -
+    sum_k<j L_jk^2 (n - 1 multipliers in parallel), its floor and the root's radicand; from
+    c = 1 on, one a clock, the rows' dot products Sigma_ij - sum_k<j L_ik L_jk overlap SQ
+    clocks of K root digits; one clock rounds L_jj; RQ clocks of K quotient bits of
+    q = floor(2^(T+1) / L_jj) (T >= every S_j = 2 F_j + G; L_jj >= 16, so the division starts
+    from the remainder 8 with quotient 0); one clock for 1/L_jj = ((q >> (T - S_j)) + 1) >> 1
+    (floor(floor(x) / 2^k) = floor(x / 2^k): exactly round(2^S_j / L_jj)); then one clock per
+    row below (L_ij = round(num_i / L_jj)). The last column stops after L_jj; one more clock
+    loads the output register, and the next matrix is taken the clock after.
+    """
+    from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS
+
+    dp = datapath(cfg)
+    n, w, k = dp.n, dp.word, CHOL_DIGITS
+    pairs = cholesky_pairs(cfg)
+    if any(f.width != w or not f.signed for f in dp.chol):
+        raise ValueError("cholesky: every L format must be a signed state word")
+    if CHOL_FLOOR_LSB < 16:
+        raise ValueError("cholesky: the division starts from remainder 8 < L_jj")
+    sigma_w = [dp.sigma(i, j).width for i, j in pairs]
+    sw = max(sigma_w)
+    acc_w = max(sw, 2 * w - 1) + max(1, math.ceil(math.log2(n))) + 1
+    shifts = [2 * f.frac_bits + INV_GUARD for f in dp.chol]     # 1/L_jj = 2^S_j / L_jj
+    sq = math.ceil(w / k)                       # root digits: W (the last is the rounding one)
+    rq = math.ceil((max(shifts) - 2) / k)       # 2^(T+1) = 8 2^(T-2): T - 2 quotient bits
+    s_top = rq * k + 2
+    col = [3 + sq + rq + (n - 1 - j) for j in range(n - 1)] + [2 + sq]
+    if n - 1 > 2 + sq + rq:                     # the rows' dot products end before scaling
+        raise ValueError(f"cholesky: {n} rows do not fit the divider's schedule")
+    latency = sum(col) + 2
+    lower = [(i, j) for i in range(n) for j in range(i + 1)]
+    offs = [sum(sigma_w[:t]) for t in range(len(pairs))]
+    return {
+        "lanes": cfg.lanes, "latency": latency, "interval": latency,
+        "n": n, "w": w, "k": k, "sw": sw, "acc_w": acc_w, "sq": sq, "rq": rq,
+        "qw": rq * k, "s_top": s_top, "shifts": shifts, "cols": col,
+        "cw": max(col).bit_length(), "jw": max(1, (n - 1).bit_length()),
+        "tw": (n * n - 1).bit_length(),
+        "floor_min": CHOL_FLOOR_LSB**2, "floor_rel_bits": CHOL_FLOOR_REL_BITS,
+        "in_width": sum(sigma_w), "out_width": len(lower) * w + 3,
+        "inputs": [{"i": i, "j": j, "off": o, "w": v, "fmt": str(dp.sigma(i, j))}
+                   for (i, j), o, v in zip(pairs, offs, sigma_w, strict=True)],
+        "outputs": [{"i": i, "j": j, "off": t * w} for t, (i, j) in enumerate(lower)],
+        "pair_mask": [[int((i, j) in pairs) for j in range(n)] for i in range(n)],
+        "chol_fmts": [str(f) for f in dp.chol],
+        "covariance": cfg.app_params.get("covariance", "full"),
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -618,23 +681,25 @@ def _twos(value: int, width: int) -> int:
 
 
 MODULES: dict[str, Module] = {
+    # the filter's blocks in stream order, then the primitives they instantiate
     "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "grng"), grng_context),
-    "exp": Module("exp", ("exp_lane", "exp"), exp_context),
-    "cordic_atan2": Module("cordic_atan2", ("cordic_atan2_lane", "cordic_atan2"),
-                           cordic_atan2_context),
-    "sqrt": Module("sqrt", ("sqrt_lane", "sqrt"), sqrt_context),
-    "recip": Module("recip", ("recip_lane", "recip"), recip_context),
-    "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
-                            propagate_uav_context, apps=("uav",)),
     "sample_cond": Module("sample_cond", ("sample_cond_lane", "sample_cond"),
                           sample_cond_context),
     "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
                             propagate_bot_context, apps=("bot",)),
-    "moments": Module("moments", ("moments_div", "moments"), moments_context),
+    "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
+                            propagate_uav_context, apps=("uav",)),
     "weight_bot": Module("weight_bot", ("weight_bot_lane", "weight_bot"), weight_bot_context,
                          uses=("cordic_atan2", "exp"), apps=("bot",)),
     "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
                          uses=("exp",), apps=("uav",)),
+    "moments": Module("moments", ("moments_div", "moments"), moments_context),
+    "cholesky": Module("cholesky", ("cholesky",), cholesky_context, laned=False),
+    "cordic_atan2": Module("cordic_atan2", ("cordic_atan2_lane", "cordic_atan2"),
+                           cordic_atan2_context),
+    "exp": Module("exp", ("exp_lane", "exp"), exp_context),
+    "sqrt": Module("sqrt", ("sqrt_lane", "sqrt"), sqrt_context),
+    "recip": Module("recip", ("recip_lane", "recip"), recip_context),
 }
 
 

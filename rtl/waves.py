@@ -15,6 +15,7 @@ from gpf.config import Config
 from gpf.model.fixed import Format
 from gpf.model.formats import datapath
 from gpf.rtl.generate import (
+    cholesky_context,
     cordic_atan2_context,
     exp_context,
     grng_context,
@@ -412,6 +413,42 @@ def weight_uav_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def cholesky_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = cholesky_context(cfg)
+    w, f0 = k["w"], dp.chol[0].frac_bits
+    sigma = [(f"Sigma_{x['i']}{x['j']}", x["off"], x["w"], dp.cov_frac(x["i"], x["j"]))
+             for x in k["inputs"] if x["i"] == x["j"] or x["j"] == 0]
+    chol = [(f"L_{x['i']}{x['j']}", x["off"], w, dp.chol[x["i"]].frac_bits)
+            for x in k["outputs"]]
+    return [
+        Group("clock and reset", [_bit("cholesky.clk"), _bit("cholesky.rst")]),
+        _stream("cholesky", "input Sigma (diagonal, column 0)", "s_axis", k["in_width"], 1,
+                sigma, signed=True),
+        _stream("cholesky", "output L", "m_axis", k["out_width"], 1, chol, signed=True),
+        Group("output flags", [
+            Trace("cholesky.m_axis_tdata", k["out_width"] - 3, k["out_width"] - 3, label="SAT"),
+            Trace("cholesky.m_axis_tdata", k["out_width"] - 1, k["out_width"] - 1,
+                  label="NOT_PD")]),
+        Group("schedule", [
+            _bit("cholesky.busy_q", "busy"), _bit("cholesky.fin_q", "done"),
+            Trace("cholesky.j_q", k["jw"] - 1, 0, label="column j", frac_bits=0),
+            Trace("cholesky.c_q", k["cw"] - 1, 0, label="clock c", frac_bits=0)]),
+        Group("column 0's units (fractions of column 0)", [
+            Trace("cholesky.dot", k["acc_w"] - 1, 0, label="dot unit (pivot at c = 0)",
+                  signed=True, frac_bits=2 * f0),
+            _bit("cholesky.floored_q", "floored"),
+            Trace("cholesky.root_q", w - 1, 0, label="isqrt(4 d)", frac_bits=f0 + 1),
+            Trace("cholesky.den_q", w - 1, 0, label="L_jj", frac_bits=f0),
+            Trace("cholesky.quo_q", k["qw"] - 1, 0, label="floor(2^(S+1) / L_jj)",
+                  frac_bits=0),
+            Trace("cholesky.inv_q", k["qw"] - 1, 0, label="1/L_jj",
+                  frac_bits=k["shifts"][0] - f0),
+            _bit("cholesky.sat_q", "SAT so far"), _bit("cholesky.notpd_q", "NOT_PD so far"),
+        ]),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
@@ -419,6 +456,7 @@ VIEWS.update(propagate_uav=propagate_uav_view)
 VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 VIEWS.update(moments=moments_view)
 VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
+VIEWS.update(cholesky=cholesky_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

@@ -41,6 +41,8 @@ def block_runs() -> list:
                   ("verilator", odd, 2), ("icarus", default, 1), ("icarus", odd, 2)]
         if len(block.apps) > 1:
             combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 1)]
+        if not block.laned:   # the same RTL at any LANES: LANES 1 only
+            combos = sorted({(sim, config, 1) for sim, config, _ in combos})
         for sim, config, lanes in combos:
             marks = SIM_MARKS[sim]
             runs.append(pytest.param(name, sim, config, lanes, marks=marks,
@@ -138,6 +140,12 @@ MUTANTS = {
     "weight-uav-sat-flag": ("weight_uav", "_weight.sv.j2",
                             "{{ name }}_full[W] != {{ name }}_full[W-1];",
                             "{{ name }}_full[W] && !{{ name }}_full[W-1];"),
+    "cholesky-floor-compare": ("cholesky", "cholesky.sv.j2", "assign floored = dot < floor_v;",
+                               "assign floored = dot <= floor_v;"),
+    "cholesky-recip-rounding": ("cholesky", "cholesky.sv.j2",
+                                "+ {{ qw + 1 }}'d1) >> 1);", "+ {{ qw + 1 }}'d0) >> 1);"),
+    "cholesky-pivot-sub": ("cholesky", "cholesky.sv.j2",
+                           "if (kk < int'(j_q)) dot = dot - ", "if (kk < int'(j_q)) dot = dot + "),
 }
 
 
