@@ -155,6 +155,19 @@ def cmd_model_wordlength(args: argparse.Namespace) -> int:
     return 0
 
 
+def _module(name: str, cfg) -> str:
+    """A block `cfg` generates, or one clear line saying which would do."""
+    from gpf.rtl.generate import MODULES
+
+    if name not in MODULES:
+        raise UsageError(f"--module {name!r}: unknown; choose one of {', '.join(MODULES)}")
+    apps = MODULES[name].apps
+    if cfg.app not in apps:
+        raise UsageError(f"--module {name}: a block of the {'/'.join(apps)} filter; config "
+                         f"{cfg.name!r} is {cfg.app} (e.g. CONFIG={apps[0]})")
+    return name
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from gpf.sim import run_sim
 
@@ -164,6 +177,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if module is None:
         module = "grng"
         note = " (the whole filter is not built yet: running the GRNG)"
+    module = _module(module, cfg)
     print(f"gpf sim: {module} on {args.sim}, config {cfg.name}{note}", flush=True)
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                      testcase=args.testcase)
@@ -199,7 +213,7 @@ def cmd_waves(args: argparse.Namespace) -> int:
     from gpf.rtl.waves import open_waves
 
     cfg = _config(args)
-    return open_waves(cfg, args.module, args.sim, launch=not args.no_launch)
+    return open_waves(cfg, _module(args.module, cfg), args.sim, launch=not args.no_launch)
 
 
 def build_parser() -> Parser:

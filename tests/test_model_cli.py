@@ -60,3 +60,14 @@ def test_model_run_bad_input(tmp_path: Path) -> None:
         run = gpf("model", "run", "--config", "bot", "--json", str(tmp_path / "x.json"), *args)
         assert run.returncode == 2, (args, run.stderr)
         assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
+
+
+def test_sim_and_waves_reject_a_block_the_config_lacks() -> None:
+    """An unknown block, or one of the other application's filter: one line, exit 2."""
+    for args, says in ((["sim", "--module", "nope"], "unknown"),
+                       (["sim", "--module", "weight_uav"], "CONFIG=uav"),
+                       (["sim", "--module", "propagate_bot", "--config", "uav"], "CONFIG=bot"),
+                       (["waves", "--module", "nope", "--no-launch"], "unknown")):
+        run = gpf(*args)
+        assert run.returncode == 2, (args, run.stderr)
+        assert len(run.stderr.strip().splitlines()) == 1 and says in run.stderr, run.stderr
