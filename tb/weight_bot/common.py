@@ -3,6 +3,7 @@ with each particle's flags, and the corner runner."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -10,6 +11,7 @@ from cocotb.handle import SimHandleBase
 
 from gpf.model.blocks import Flag
 from gpf.model.fixed import Format
+from gpf.model.formats import Const, Datapath, datapath
 from gpf.tb.harness import Bench, start
 from gpf.tb.scoreboard import Field
 from gpf.tb.streaming import STEP, StreamBlock, idle_inputs, run_stream
@@ -71,3 +73,30 @@ def spread_lanes(rows: np.ndarray, lanes: int) -> np.ndarray:
     k = len(rows)
     idx = (np.arange(k)[:, None] + np.arange(lanes)[None, :]) % k
     return rows[idx]
+
+
+def wrong_c_u(dp: Datapath) -> Datapath:
+    """The corrupted model's datapath: c_u one LSB too large."""
+    c = dp.consts["c_u"]
+    return dataclasses.replace(dp, consts={**dp.consts, "c_u": Const(c.value, c.raw + 1, c.frac)})
+
+
+async def check_weights_span(dut: SimHandleBase, blk: StreamBlock, b: Bench, sc,
+                             steps: int) -> None:
+    """Steps of 32 random beats through the block (bit-exact), then the shares of the model's
+    outputs on those beats: weights 0, strictly between, above 1/2, and saturation all occur."""
+    lasts = ([False] * 31 + [True]) * steps
+    ops = sc.operands(sum(lasts), "span")
+    seen = sc.inputs(len(lasts), "span")
+    idle_inputs(dut)
+    await start(dut)
+    sb, _, _ = await run_stream(dut, blk, b, seen, lasts, 0.1, 0.1, f"{blk.name}-span", ops=ops)
+    sb.assert_clean()
+    step_no = np.repeat(np.arange(steps), 32)
+    exp = blk.model({**seen, STEP: step_no, **{k: v[step_no] for k, v in ops.items()}})
+    one_w, wv = 1 << datapath(b.cfg).weight.frac_bits, exp["w"]
+    shares = {"zero": (wv == 0).mean(), "mid": ((wv > 0) & (wv < one_w)).mean(),
+              "above_half": (wv > one_w // 2).mean(), "sat": exp["sat"].mean()}
+    dut._log.info("weight shares: %s", {k: round(float(v), 3) for k, v in shares.items()})
+    assert shares["zero"] > 0.05 and shares["mid"] > 0.1 and shares["above_half"] > 0.01
+    assert shares["sat"] > 0.001

@@ -4,7 +4,6 @@ one call per step (the observer and the bearing z are per-step operands)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import cocotb
@@ -12,20 +11,24 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 
 from gpf.model.blocks import weight_bot
-from gpf.model.formats import Const, Datapath, datapath
+from gpf.model.formats import Datapath, datapath
 from gpf.tb.cordic_atan2.test_cordic_atan2 import turns
-from gpf.tb.harness import Bench, bench, start
+from gpf.tb.harness import Bench, bench
 from gpf.tb.scoreboard import Field
 from gpf.tb.streaming import (
-    STEP,
     StreamBlock,
     check_corrupted_model_is_caught,
     check_latency_and_throughput,
     check_random_beats,
-    idle_inputs,
-    run_stream,
 )
-from gpf.tb.weight_bot.common import SAT, run_steps, spread_lanes, step_model
+from gpf.tb.weight_bot.common import (
+    SAT,
+    check_weights_span,
+    run_steps,
+    spread_lanes,
+    step_model,
+    wrong_c_u,
+)
 
 N = 4   # px, vx, py, vy
 
@@ -208,35 +211,14 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
 async def test_weights_span(dut: SimHandleBase) -> None:
     """The random stimulus reaches every region: weights 0, strictly between, 1; saturation."""
     b = bench()
-    sc = Scenario(b)
-    blk = block(b)
-    n = 2_000
-    lasts = ([False] * 31 + [True]) * (n // 32)
-    ops = sc.operands(sum(lasts), "span")
-    idle_inputs(dut)
-    await start(dut)
-    seen = sc.inputs(len(lasts), "span")
-    sb, _, _ = await run_stream(dut, blk, b, seen, lasts, 0.1, 0.1, "weight_bot-span", ops=ops)
-    sb.assert_clean()
-    # the scoreboard compared every beat; the shares come from the model on the same beats
-    steps = np.repeat(np.arange(len(lasts) // 32), 32)
-    exp = blk.model({**seen, STEP: steps, **{k: v[steps] for k, v in ops.items()}})
-    one_w = 1 << datapath(b.cfg).weight.frac_bits
-    wv = exp["w"]
-    shares = {"zero": (wv == 0).mean(), "mid": ((wv > 0) & (wv < one_w)).mean(),
-              "above_half": (wv > one_w // 2).mean(), "sat": exp["sat"].mean()}
-    dut._log.info("weight shares: %s", {k: round(float(v), 3) for k, v in shares.items()})
-    assert shares["zero"] > 0.05 and shares["mid"] > 0.1 and shares["above_half"] > 0.01
-    assert shares["sat"] > 0.001
+    await check_weights_span(dut, block(b), b, Scenario(b), 62)
 
 
 @cocotb.test()
 async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     """A deliberately wrong model: c_u one LSB too large."""
     b = bench()
-    dp = datapath(b.cfg)
-    c = dp.consts["c_u"]
-    bad = dataclasses.replace(dp, consts={**dp.consts, "c_u": Const(c.value, c.raw + 1, c.frac)})
+    bad = wrong_c_u(datapath(b.cfg))
     blk = block(b, bad)
     sc = Scenario(b)
     await check_corrupted_model_is_caught(dut, blk, b, sc.inputs, sc.operands)

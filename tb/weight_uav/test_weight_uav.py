@@ -4,7 +4,6 @@ call per step (the GPS velocity is a per-step operand)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import cocotb
@@ -12,19 +11,23 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 
 from gpf.model.blocks import weight_uav
-from gpf.model.formats import Const, Datapath, datapath
-from gpf.tb.harness import Bench, bench, start
+from gpf.model.formats import Datapath, datapath
+from gpf.tb.harness import Bench, bench
 from gpf.tb.scoreboard import Field
 from gpf.tb.streaming import (
-    STEP,
     StreamBlock,
     check_corrupted_model_is_caught,
     check_latency_and_throughput,
     check_random_beats,
-    idle_inputs,
-    run_stream,
 )
-from gpf.tb.weight_bot.common import SAT, run_steps, spread_lanes, step_model
+from gpf.tb.weight_bot.common import (
+    SAT,
+    check_weights_span,
+    run_steps,
+    spread_lanes,
+    step_model,
+    wrong_c_u,
+)
 
 N = 7          # q0 .. q3, vE, vN, vU
 V = (4, 5, 6)  # the velocity components
@@ -183,30 +186,13 @@ async def test_weights_span(dut: SimHandleBase) -> None:
     """Steps of 32: the random stimulus reaches weights 0, strictly between and above 1/2, and
     saturation (shares from the model on the beats the scoreboard compared)."""
     b = bench()
-    sc, blk = Scenario(b), block(b)
-    lasts = ([False] * 31 + [True]) * 64
-    ops = sc.operands(sum(lasts), "span")
-    seen = sc.inputs(len(lasts), "span")
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, _ = await run_stream(dut, blk, b, seen, lasts, 0.1, 0.1, "weight_uav-span", ops=ops)
-    sb.assert_clean()
-    steps = np.repeat(np.arange(len(lasts) // 32), 32)
-    exp = blk.model({**seen, STEP: steps, **{k: v[steps] for k, v in ops.items()}})
-    one_w, wv = 1 << datapath(b.cfg).weight.frac_bits, exp["w"]
-    shares = {"zero": (wv == 0).mean(), "mid": ((wv > 0) & (wv < one_w)).mean(),
-              "above_half": (wv > one_w // 2).mean(), "sat": exp["sat"].mean()}
-    dut._log.info("weight shares: %s", {k: round(float(v), 3) for k, v in shares.items()})
-    assert shares["zero"] > 0.05 and shares["mid"] > 0.1 and shares["above_half"] > 0.01
-    assert shares["sat"] > 0.001
+    await check_weights_span(dut, block(b), b, Scenario(b), 64)
 
 
 @cocotb.test()
 async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     """A deliberately wrong model: c_u one LSB too large."""
     b = bench()
-    dp = datapath(b.cfg)
-    c = dp.consts["c_u"]
-    bad = dataclasses.replace(dp, consts={**dp.consts, "c_u": Const(c.value, c.raw + 1, c.frac)})
+    bad = wrong_c_u(datapath(b.cfg))
     blk, sc = block(b, bad), Scenario(b)
     await check_corrupted_model_is_caught(dut, blk, b, sc.inputs, sc.operands)
