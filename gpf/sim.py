@@ -34,7 +34,7 @@ class SimResult:
 
 
 def test_module(module: str) -> str:
-    return f"gpf.tb.{module}.test_{module}"
+    return MODULES[module].testbench or f"gpf.tb.{module}.test_{module}"
 
 
 def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = False,

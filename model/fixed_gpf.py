@@ -64,33 +64,38 @@ class FixedGPF:
         return self.quantise_state(mu0), chol
 
     # ---- one step ----------------------------------------------------------------------------
-    def propagate(self, x: np.ndarray, e: np.ndarray, inputs: dict) -> tuple[np.ndarray, int]:
+    def propagate(self, x: np.ndarray, e: np.ndarray, inputs: dict,
+                  per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
         if self.dp.app == "bot":
-            return blocks.propagate_bot(self.dp, x, e)
-        return blocks.propagate_uav(self.dp, x, e, inputs["omega"], inputs["accel"])
+            return blocks.propagate_bot(self.dp, x, e, per_particle)
+        return blocks.propagate_uav(self.dp, x, e, inputs["omega"], inputs["accel"],
+                                    per_particle)
 
-    def weight(self, x: np.ndarray, inputs: dict) -> tuple[np.ndarray, int]:
+    def weight(self, x: np.ndarray, inputs: dict,
+               per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
         if self.dp.app == "bot":
-            return blocks.weight_bot(self.dp, x, inputs["z"], inputs["observer"])
-        return blocks.weight_uav(self.dp, x, inputs["v_gps"])
+            return blocks.weight_bot(self.dp, x, inputs["z"], inputs["observer"], per_particle)
+        return blocks.weight_uav(self.dp, x, inputs["v_gps"], per_particle)
 
     def step(self, mu: np.ndarray, chol: np.ndarray, sigma_prev: dict, inputs: dict,
              e: np.ndarray, keep_particles: bool = False) -> StepResult:
-        """One filter step. inputs: raw per-step inputs (see quantise_inputs); e: (N, D) raw."""
+        """One filter step. inputs: raw per-step inputs (see quantise_inputs); e: (N, D) raw.
+        keep_particles: the debug tap's particles and each one's SAT flag per block."""
         dp, n = self.dp, self.dp.n
-        cond, f1 = blocks.sample_cond(dp, mu, chol, e[:, :n])
-        prop, f2 = self.propagate(cond, e[:, n:], inputs)
+        cond, f1 = blocks.sample_cond(dp, mu, chol, e[:, :n], per_particle=True)
+        prop, f2 = self.propagate(cond, e[:, n:], inputs, per_particle=True)
         ref, f3 = self.propagate(mu[None, :], np.zeros((1, e.shape[1] - n), np.int64), inputs)
         ref = ref[0]
-        w, f4 = self.weight(prop, inputs)
+        w, f4 = self.weight(prop, inputs, per_particle=True)
         new_mu, sigma, f5 = blocks.moments(dp, prop, w, ref, self.pairs)
-        flags = f1 | f2 | f3 | f4 | f5
+        flags = _or(f1) | _or(f2) | f3 | _or(f4) | f5
         if f5 & Flag.ZERO_WEIGHTS:  # every weight underflowed: keep the prediction and spread
             sigma, chol_out = dict(sigma_prev), chol
         else:
             chol_out, f6 = blocks.cholesky(dp, sigma)
             flags |= f6
-        taps = {"cond": cond, "prop": prop, "weight": w} if keep_particles else {}
+        taps = {"cond": cond, "cond_sat": f1 != 0, "prop": prop, "prop_sat": f2 != 0,
+                "weight": w, "weight_sat": f4 != 0} if keep_particles else {}
         return StepResult(new_mu, sigma, chol_out, int(flags), taps)
 
     def quantise_inputs(self, raw_inputs: dict) -> dict:
@@ -120,6 +125,10 @@ class FixedGPF:
         for (i, j), v in sigma.items():
             out[i, j] = out[j, i] = v / 2.0 ** self.dp.cov_frac(i, j)
         return out
+
+
+def _or(flags: np.ndarray) -> int:
+    return int(np.bitwise_or.reduce(flags)) if len(flags) else 0
 
 
 @dataclass

@@ -24,6 +24,7 @@ from gpf.model.fixed import Format
 from gpf.model.formats import CONST_WIDTH, INV_GUARD, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip
+from gpf.rtl.filter import filter_context
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 
@@ -39,16 +40,29 @@ class Module:
     uses: tuple[str, ...] = ()
     apps: tuple[str, ...] = ("bot", "uav")   # the applications whose filter has this block
     laned: bool = True    # False: one lane whatever LANES (a serial block)
+    blocks: tuple[str, ...] = ()   # a filter top: the modules it instantiates whole
+    templates: tuple[tuple[str, str], ...] = ()   # (part, template) where they differ
+    testbench: str | None = None   # its cocotb test module (default gpf.tb.<top>.test_<top>)
+
+    @property
+    def is_filter(self) -> bool:
+        return bool(self.blocks)
+
+    def template(self, part: str) -> str:
+        return dict(self.templates).get(part, part)
 
     def files(self) -> list[str]:
-        """Its SystemVerilog files, dependencies first: used modules' parts but their tops."""
+        """Its SystemVerilog files, dependencies first: used modules' parts but their tops,
+        contained blocks whole."""
         used = [part for name in self.uses for part in MODULES[name].files()
                 if part != MODULES[name].top]
+        used += [part for name in self.blocks for part in MODULES[name].files()]
         return list(dict.fromkeys(used + list(self.parts)))
 
 
-def grng_context(cfg: Config) -> dict[str, Any]:
-    model = grng_model.GrngModel(cfg)
+def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
+    """The GRNG of `lanes` lanes (default cfg.lanes; the filter's has draws x LANES)."""
+    model = grng_model.GrngModel(cfg, lanes)
     seg = model.seg
     c0_w, c1_w, c2_w = model.coef_widths
     s1_w, s2_w = model.sum_widths
@@ -63,8 +77,8 @@ def grng_context(cfg: Config) -> dict[str, Any]:
         word = (_twos(c2, c2_w) << (c1_w + c0_w)) | (_twos(c1, c1_w) << c0_w) | _twos(c0, c0_w)
         rom.append(f"{word:0{(rom_w + 3) // 4}X}")
     return {
-        "lanes": cfg.lanes,
-        "lane_w": max(1, math.ceil(math.log2(cfg.lanes))),
+        "lanes": model.lanes,
+        "lane_w": max(1, math.ceil(math.log2(model.lanes))),
         "out_fmt": str(cfg.noise),
         "out_w": cfg.noise.width,
         "latency": grng_model.LATENCY,
@@ -700,6 +714,13 @@ MODULES: dict[str, Module] = {
     "exp": Module("exp", ("exp_lane", "exp"), exp_context),
     "sqrt": Module("sqrt", ("sqrt_lane", "sqrt"), sqrt_context),
     "recip": Module("recip", ("recip_lane", "recip"), recip_context),
+    # the whole filters: their own GRNG (draws x LANES lanes), a FIFO, the controller, the top
+    **{f"gpf_{app}": Module(
+        f"gpf_{app}", ("gpf_grng", "gpf_fifo", "ctrl", f"gpf_{app}"), filter_context,
+        uses=("grng",), apps=(app,), blocks=("sample_cond", f"propagate_{app}", f"weight_{app}",
+                             "moments", "cholesky"),
+        templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf")
+       for app in ("bot", "uav")},
 }
 
 
@@ -765,8 +786,10 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
         module = MODULES[name]
         context = module.context(cfg)
         for part in module.parts:
-            texts[f"{part}.sv"] = env.get_template(f"{part}.sv.j2").render(
-                module=part, config_file=config_file, config_name=cfg.name, **context)
+            # a part may have its own context (the filter's GRNG: more lanes than the block's)
+            part_context = context.get("part_contexts", {}).get(part, context)
+            texts[f"{part}.sv"] = env.get_template(f"{module.template(part)}.sv.j2").render(
+                module=part, config_file=config_file, config_name=cfg.name, **part_context)
         files[name] = [out_dir / f"{part}.sv" for part in module.files()]
         texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.files())
         manifest["modules"][name] = {

@@ -78,12 +78,12 @@ class StreamDriver:
     with the first beat of a step): it is driven as that beat is presented."""
 
     def __init__(self, clk: SimHandleBase, prefix: SimHandleBase, name: str, idle: float,
-                 rng: random.Random, op: SimHandleBase | None = None):
+                 rng: random.Random, op: SimHandleBase | None = None, has_last: bool = True):
         self.clk, self.idle, self.rng, self.op = clk, idle, rng, op
         self.tvalid = getattr(prefix, f"{name}_tvalid")
         self.tready = getattr(prefix, f"{name}_tready")
         self.tdata = getattr(prefix, f"{name}_tdata")
-        self.tlast = getattr(prefix, f"{name}_tlast")
+        self.tlast = getattr(prefix, f"{name}_tlast") if has_last else None
         self.tvalid.value = 0
 
     async def send(self, beats: list[tuple[int, bool]] | list[tuple[int, bool, int | None]]
@@ -97,7 +97,8 @@ class StreamDriver:
                 self.op.value = op[0]
             self.tvalid.value = 1
             self.tdata.value = data
-            self.tlast.value = int(last)
+            if self.tlast is not None:
+                self.tlast.value = int(last)
             while True:
                 await ReadOnly()
                 taken = self.tready.value == 1

@@ -1,0 +1,73 @@
+"""The whole filter's top and controller: their widths, from the blocks' own contexts.
+
+The top only wires blocks: every field it moves is sized by the block that makes it, and the
+checks here fail generation if two blocks disagree about a stream between them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gpf.config import Config
+from gpf.model.formats import datapath
+from gpf.model.grng import COMPONENTS
+
+CYCLES_W = 32          # the step's cycle count in the output beat
+FIFO_DEPTH_LOG2 = 2    # process draws waiting beside sample_cond (its latency 2 + 1 in flight)
+STEP_FIELDS = {"bot": ["z", "ox", "oy"],
+               "uav": ["omega0", "omega1", "omega2", "accel0", "accel1", "accel2",
+                       "v0", "v1", "v2"]}
+
+
+def filter_context(cfg: Config) -> dict[str, Any]:
+    from gpf.rtl.generate import MODULES, grng_context
+
+    dp = datapath(cfg)
+    app, n, word, lanes = dp.app, dp.n, dp.word, cfg.lanes
+    ctx = {name: MODULES[name].context(cfg)
+           for name in ("sample_cond", f"propagate_{app}", f"weight_{app}", "moments",
+                        "cholesky")}
+    sc, prop, mom, chol = (ctx[k] for k in ("sample_cond", f"propagate_{app}", "moments",
+                                            "cholesky"))
+    draws = dp.draws()
+    mu_w, l_w = n * word, n * (n + 1) // 2 * word
+    sig_w = chol["in_width"]
+    pe_w = (draws - n) * dp.noise.width
+    prop_op_w = prop.get("op_width", 0)
+    weight_op_w = 3 * word
+    cond_lane_w = sc["out_width"]
+    prop_lane_w = mu_w + 1
+    part_lane_w = mu_w + dp.weight.width + 1
+    # the streams between blocks must agree
+    checks = {
+        "sample_cond op = {L, mu}": sc["op_width"] == mu_w + l_w,
+        "sample_cond x = the state": sc["x_width"] == mu_w,
+        "propagate in = {draws, x}": prop["in_width"] == mu_w + pe_w,
+        "propagate out = {sat, x}": prop["out_width"] == prop_lane_w,
+        "moments in = {w, x}": mom["lane_w"] == part_lane_w - 1,
+        "moments out = {flags, Sigma, mu}": mom["out_w"] == mu_w + sig_w + 3,
+        "cholesky out = {flags, L}": chol["out_width"] == l_w + 3,
+        "FIFO covers sample_cond": sc["latency"] + 1 <= 1 << FIFO_DEPTH_LOG2,
+    }
+    broken = [name for name, ok in checks.items() if not ok]
+    if broken:
+        raise ValueError(f"gpf_{app}: blocks disagree: {', '.join(broken)}")
+    npairs = len(mom["pairs"])
+    pw = cfg.particles.bit_length()
+    grng = grng_context(cfg, lanes=draws * lanes)
+    return {
+        "app": app, "lanes": lanes, "n": n, "word": word, "particles": cfg.particles,
+        "draws": draws, "noise_w": dp.noise.width, "pe_w": pe_w, "pw": pw,
+        "mu_w": mu_w, "l_w": l_w, "sig_w": sig_w, "npairs": npairs, "ntri": n * (n + 1) // 2,
+        "mom_w": mom["out_w"], "chol_w": chol["out_width"],
+        "init_w": pw + mu_w + sig_w, "step_w": len(STEP_FIELDS[app]) * word,
+        "step_fields": STEP_FIELDS[app], "prop_op_w": prop_op_w, "weight_op_w": weight_op_w,
+        "est_w": mu_w + sig_w + l_w + 6 + CYCLES_W, "cycles_w": CYCLES_W,
+        "cond_lane_w": cond_lane_w, "prop_lane_w": prop_lane_w, "part_lane_w": part_lane_w,
+        "propagate": f"propagate_{app}", "weight": f"weight_{app}",
+        "ref_lane": f"propagate_{app}_lane", "ref_out": "x_out" if app == "bot" else "y",
+        "ref_latency": prop["latency"], "fifo_depth_log2": FIFO_DEPTH_LOG2,
+        "grng_words": draws * lanes * COMPONENTS,
+        "latency": None,
+        "part_contexts": {"gpf_grng": grng},
+    }

@@ -1,0 +1,292 @@
+"""The whole filter under test: its streams' fields, the model it is checked against, and one
+run (seed load, init, steps) with every particle, weight, mean, covariance and L entry compared
+bit-exactly with gpf.model.fixed_gpf.FixedGPF.
+
+A run is described by a RunSpec (from GPF_RUN, set by `gpf run` and the tests); its results go
+to RunSpec.out as JSON for `gpf run` to report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cocotb
+import numpy as np
+from cocotb.handle import SimHandleBase
+from cocotb.triggers import RisingEdge
+from tqdm import tqdm
+
+from gpf.model.fixed import Format
+from gpf.model.fixed_gpf import FixedGPF, StepResult
+from gpf.model.float_gpf import FloatGPF
+from gpf.model.grng import seed_words
+from gpf.model.scenarios import Scenario, read_csv
+from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_names
+from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
+from gpf.tb.harness import Bench, start
+from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
+from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
+
+FLAGS = Format.parse("u3.0")
+SAT = Format.parse("u1.0")
+
+
+@dataclass
+class RunSpec:
+    steps: int = 3
+    particles: int | None = None       # default: the config's maximum
+    scenario: str | None = None        # a scenario name or a CSV file (default: the app's)
+    seed: int = 1                      # scenario seed and GRNG seed load (None: reset state)
+    load_seed: bool = True
+    stall: float = 0.0                 # probability of a stall on every stream the tb drives
+    out: str | None = None             # results JSON
+    progress: bool = False
+
+    @classmethod
+    def from_env(cls, **defaults: Any) -> RunSpec:
+        return cls(**{**defaults, **json.loads(os.environ.get("GPF_RUN", "{}"))})
+
+
+@dataclass
+class Streams:
+    """Fields of every stream of gpf_<app> (LSB first, as ctrl and the top pack them)."""
+
+    cond: list[Field]
+    part: list[Field]
+    est: list[Field]
+    init: list[Field]
+    step: list[Field]
+    pairs: list[tuple[int, int]]
+    lower: list[tuple[int, int]]
+
+
+def streams(gpf: FixedGPF) -> Streams:
+    dp = gpf.dp
+    n = dp.n
+    x = [Field(f"x{i}", dp.x[i]) for i in range(n)]
+    lower = [(i, j) for i in range(n) for j in range(i + 1)]
+    sig = [Field(f"s{i}_{j}", dp.sigma(i, j)) for i, j in gpf.pairs]
+    mu = [Field(f"mu{i}", dp.x[i]) for i in range(n)]
+    chol = [Field(f"l{i}_{j}", dp.chol[i]) for i, j in lower]
+    if dp.app == "bot":
+        step = [Field("z", Format(True, 0, dp.angle_frac - 1)), Field("ox", dp.x[0]),
+                Field("oy", dp.x[2])]
+    else:
+        step = [Field(name, fmt) for name, fmt in zip(
+            STEP_FIELDS["uav"], [dp.gyro] * 3 + [dp.accel] * 3 + list(dp.x[4:7]), strict=True)]
+    return Streams(
+        cond=x + [Field("sat", SAT)],
+        part=x + [Field("w", dp.weight), Field("sat", SAT)],
+        est=mu + sig + chol + [Field("flags", FLAGS), Field("sticky", FLAGS),
+                               Field("cycles", Format(False, CYCLES_W, 0))],
+        init=[Field("particles", Format(False, gpf.cfg.particles.bit_length(), 0))] + mu + sig,
+        step=step, pairs=gpf.pairs, lower=lower)
+
+
+def step_values(gpf: FixedGPF, raw: dict) -> dict[str, int]:
+    """A step's raw inputs (FixedGPF.quantise_inputs) as s_step fields."""
+    if gpf.dp.app == "bot":
+        return {"z": raw["z"], "ox": raw["observer"][0], "oy": raw["observer"][1]}
+    values = list(raw["omega"]) + list(raw["accel"]) + list(raw["v_gps"])
+    return dict(zip(STEP_FIELDS["uav"], (int(v) for v in values), strict=True))
+
+
+def one_beat(fields: list[Field], values: dict[str, int]) -> int:
+    return pack(fields, {k: np.array([[v]]) for k, v in values.items()})[0]
+
+
+def expected_taps(res: StepResult, lanes: int) -> tuple[dict, dict]:
+    """(cond, part) raw fields, (beats, lanes), of one step's particles."""
+    def beats(a: np.ndarray) -> np.ndarray:
+        return np.asarray(a, dtype=np.int64).reshape(-1, lanes)
+
+    t = res.particles
+    n = t["cond"].shape[1]
+    cond = {f"x{i}": beats(t["cond"][:, i]) for i in range(n)} | {"sat": beats(t["cond_sat"])}
+    part = {f"x{i}": beats(t["prop"][:, i]) for i in range(n)}
+    part |= {"w": beats(t["weight"]), "sat": beats(t["prop_sat"] | t["weight_sat"])}
+    return cond, part
+
+
+def expected_est(s: Streams, res: StepResult, sticky: int) -> dict[str, np.ndarray]:
+    values = {f"mu{i}": int(v) for i, v in enumerate(res.mu)}
+    values |= {f"s{i}_{j}": int(res.sigma[(i, j)]) for i, j in s.pairs}
+    values |= {f"l{i}_{j}": int(res.chol[i, j]) for i, j in s.lower}
+    values |= {"flags": res.flags, "sticky": sticky}
+    return {k: np.array([[v]], dtype=np.int64) for k, v in values.items()}
+
+
+@dataclass
+class RunResult:
+    steps: int
+    particles: int
+    lanes: int
+    config: str
+    sim: str
+    seed: int
+    scenario: str
+    particles_checked: int = 0
+    values_checked: int = 0
+    mismatches: int = 0
+    first_mismatch: str | None = None
+    cycles_per_step: list[int] = field(default_factory=list)
+    period_per_step: list[int] = field(default_factory=list)  # clocks between result beats
+    flags: list[list[str]] = field(default_factory=list)
+    rmse: dict[str, float] = field(default_factory=dict)
+    estimates: dict[str, list] = field(default_factory=dict)
+    wall_seconds: float = 0.0
+
+
+def scenario_of(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario]:
+    if spec.scenario and spec.scenario.endswith(".csv"):
+        sc = read_csv(spec.scenario)
+        return Path(spec.scenario).name, sc
+    name = spec.scenario or DEFAULT_SCENARIO[gpf.dp.app]
+    return name, SCENARIOS[name](gpf.cfg, spec.steps, spec.seed)
+
+
+class FilterBench:
+    """Drives gpf_<app> through a run and scores every stream against the model."""
+
+    def __init__(self, dut: SimHandleBase, b: Bench, spec: RunSpec, corrupt: bool = False):
+        self.dut, self.b, self.spec = dut, b, spec
+        self.gpf = FixedGPF(b.cfg, particles=spec.particles)
+        self.s = streams(self.gpf)
+        self.corrupt = corrupt
+        self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
+                                        expect_mismatch=corrupt)
+                       for name, fields in (("cond", self.s.cond), ("part", self.s.part),
+                                            ("est", self.s.est))}
+
+    def idle(self) -> None:
+        d = self.dut
+        for name in ("s_seed", "s_init", "s_step"):
+            getattr(d, f"{name}_tvalid").value = 0
+            getattr(d, f"{name}_tdata").value = 0
+        for name in ("m_est", "m_cond", "m_part"):
+            getattr(d, f"{name}_tready").value = 1
+
+    async def send(self, name: str, words: list[int], idle: float = 0.0, tag: str = "") -> None:
+        """Beats on a stream without tlast (seed, init, step inputs)."""
+        drv = StreamDriver(self.dut.clk, self.dut, name, idle, self.b.rng(f"{name}{tag}"),
+                           has_last=False)
+        await drv.send([(word, False) for word in words])
+
+    async def run(self) -> RunResult:
+        d, spec, gpf, s = self.dut, self.spec, self.gpf, self.s
+        lanes = gpf.cfg.lanes
+        name, sc = scenario_of(gpf, spec)
+        steps = sc.steps
+        res_out = RunResult(steps, gpf.particles, lanes, gpf.cfg.name, cocotb.SIM_NAME,
+                            spec.seed, name)
+        self.idle()
+        await start(d)
+        # the model's draws: the GRNG after the same seed load (or after reset)
+        draws = gpf.draws(steps, spec.seed if spec.load_seed else None)
+        if self.corrupt:   # the broken model: conditioning draws in the wrong order
+            draws = draws.copy()
+            draws[:, :, : gpf.dp.n] = draws[:, :, gpf.dp.n - 1:: -1]
+        if spec.load_seed:
+            await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes))
+        mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
+        mu, chol = gpf.init(mu0, sigma0)
+        sigma = {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** gpf.dp.cov_frac(i, j) + 0.5)
+                 for i, j in gpf.pairs}
+        init = {"particles": gpf.particles} | {f"mu{i}": int(v) for i, v in enumerate(mu)}
+        init |= {f"s{i}_{j}": v for (i, j), v in sigma.items()}
+        await self.send("s_init", [one_beat(s.init, init)])
+
+        stall = spec.stall
+        mons = {k: StreamMonitor(d.clk, d, f"m_{k}", has_last=(k != "est"))
+                for k in ("cond", "part", "est")}
+        readies = [ReadyDriver(d.clk, getattr(d, f"m_{k}_tready"), stall,
+                               self.b.rng(f"ready-{k}")) for k in mons] if stall else []
+        raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
+        step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
+        feeder = cocotb.start_soon(self.send("s_step", step_words, stall))
+        beats = gpf.particles // lanes
+        sticky, rtl_mu = 0, [gpf.to_real_mu(mu)]
+        bar = tqdm(range(1, steps + 1), desc=f"gpf_{gpf.dp.app} {gpf.cfg.name} N={gpf.particles}",
+                   unit="step", disable=not spec.progress, file=sys.__stderr__, leave=False)
+        limit = 200 * (beats + 1000) * (1 + int(10 * stall))
+        for k in bar:
+            res = gpf.step(mu, chol, sigma, raw_inputs[k - 1], draws[k - 1], keep_particles=True)
+            waited = 0
+            while len(mons["est"].beats) < k:
+                await RisingEdge(d.clk)
+                waited += 1
+                assert waited < limit, f"step {k}: no result after {waited} clocks"
+            exp_cond, exp_part = expected_taps(res, lanes)
+            lo, hi = (k - 1) * beats, k * beats
+            for tap, exp, fields in (("cond", exp_cond, s.cond), ("part", exp_part, s.part)):
+                got = mons[tap].beats[lo:hi]
+                assert len(got) == beats, f"step {k}: {len(got)} {tap} beats, expected {beats}"
+                lasts = [bt.last for bt in got]
+                assert lasts == [False] * (beats - 1) + [True], f"step {k}: {tap} tlast wrong"
+                self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes),
+                                         first_beat=lo)
+            sticky |= res.flags
+            est = unpack([mons["est"].beats[k - 1].data], s.est, 1)
+            exp_est = expected_est(s, res, sticky)
+            exp_est["cycles"] = est["cycles"]   # the count is checked against the period below
+            self.boards["est"].compare(exp_est, est, first_beat=k - 1)
+            res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
+            res_out.flags.append(flag_names(int(est["flags"][0, 0])))
+            rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
+                                                    for i in range(gpf.dp.n)])))
+            mu, chol, sigma = res.mu, res.chol, res.sigma
+            res_out.particles_checked += gpf.particles
+            bar.set_postfix(mismatches=self.mismatches, cycles=res_out.cycles_per_step[-1])
+        await feeder
+        for _ in range(50):   # nothing more may come out
+            await RisingEdge(d.clk)
+        for r in readies:
+            r.stop()
+        for m in mons.values():
+            m.stop()
+        assert len(mons["est"].beats) == steps, "extra result beats"
+        assert len(mons["cond"].beats) == len(mons["part"].beats) == steps * beats, \
+            "extra tap beats"
+        est_cycles = [bt.cycle for bt in mons["est"].beats]
+        res_out.period_per_step = [b - a for a, b in zip(est_cycles, est_cycles[1:],
+                                                         strict=False)]
+        res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
+        res_out.mismatches = self.mismatches
+        res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
+                                       if b.first_mismatch), None)
+        res_out.rmse, res_out.estimates = accuracy(gpf, sc, draws, np.array(rtl_mu))
+        return res_out
+
+    @property
+    def mismatches(self) -> int:
+        return sum(b.mismatched for b in self.boards.values())
+
+
+def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray
+             ) -> tuple[dict[str, float], dict[str, list]]:
+    """RMSE over steps k >= 1 of the RTL's, the fixed-point model's and the float64 model's
+    estimates (the float one driven by the same draws), and the estimates themselves."""
+    from gpf.model.fixed_gpf import run
+
+    fixed = run(gpf, sc, draws=draws)
+    floating = FloatGPF(gpf.cfg, gpf.particles).run(sc, draws=gpf.dp.noise.to_real(draws))
+    app = gpf.dp.app
+    rmse = {name: float(math.sqrt(np.mean(error_per_step(app, est, sc.truth)[1:] ** 2)))
+            for name, est in (("float", floating.mu), ("fixed", fixed.mu), ("rtl", rtl_mu))}
+    estimates = {"truth": sc.truth.tolist(), "float": floating.mu.tolist(),
+                 "fixed": fixed.mu.tolist(), "rtl": rtl_mu.tolist()}
+    if app == "bot":
+        estimates["observer"] = sc.inputs["observer"].tolist()
+    return rmse, estimates
+
+
+def write_result(res: RunResult, path: str | None) -> None:
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(asdict(res), indent=1) + "\n")

@@ -1,0 +1,59 @@
+"""cocotb testbench of the whole filter, gpf_bot or gpf_uav (tb/gpf/filter.py does the work).
+
+test_filter: the run GPF_RUN describes (`gpf run`; a few steps by default), no stalls: every
+  particle, weight and estimate bit-exact, and each step's cycle count equal to the measured
+  period between result beats.
+test_stalls: random stalls on every stream the testbench drives or reads, the same checks.
+test_corrupted_model_is_caught: a model with its draws in the wrong order must fail.
+"""
+
+from __future__ import annotations
+
+import cocotb
+from cocotb.handle import SimHandleBase
+
+from gpf.tb.gpf.filter import FilterBench, RunSpec, write_result
+from gpf.tb.harness import bench
+
+
+def check(res, bench_: FilterBench) -> None:
+    assert res.particles_checked == res.steps * res.particles
+    assert res.mismatches == 0, f"{res.mismatches} mismatches; first: {res.first_mismatch}"
+
+
+@cocotb.test()
+async def test_filter(dut: SimHandleBase) -> None:
+    b = bench()
+    spec = RunSpec.from_env(steps=2 if b.short else 4, particles=64 * b.cfg.lanes)
+    fb = FilterBench(dut, b, spec)
+    res = await fb.run()
+    write_result(res, spec.out)
+    dut._log.info("%d steps x %d particles: %d values checked, %d mismatches; cycles %s",
+                  res.steps, res.particles, res.values_checked, res.mismatches,
+                  res.cycles_per_step)
+    check(res, fb)
+    # with nothing stalled, a step's count is the period of dependent steps
+    assert res.period_per_step == res.cycles_per_step[1:], \
+        f"periods {res.period_per_step}, counts {res.cycles_per_step}"
+
+
+@cocotb.test()
+async def test_stalls(dut: SimHandleBase) -> None:
+    b = bench()
+    spec = RunSpec.from_env(steps=2, particles=32 * b.cfg.lanes)
+    spec.stall, spec.out, spec.progress = 0.3, None, False
+    fb = FilterBench(dut, b, spec)
+    res = await fb.run()
+    dut._log.info("stalls 0.3: %d values checked, %d mismatches", res.values_checked,
+                  res.mismatches)
+    check(res, fb)
+
+
+@cocotb.test()
+async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
+    b = bench()
+    spec = RunSpec(steps=1, particles=16 * b.cfg.lanes)
+    fb = FilterBench(dut, b, spec, corrupt=True)
+    res = await fb.run()
+    assert res.mismatches > 0 and res.first_mismatch, "a wrong model passed"
+    dut._log.info("corrupted model caught: %s", res.first_mismatch)
