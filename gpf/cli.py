@@ -193,6 +193,50 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0 if result.passed else EXIT_FAILED
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    import json
+
+    from gpf.run import RunArgs, plot, run_filter, summary_lines
+
+    for name in ("steps", "particles"):
+        _positive(f"--{name}", getattr(args, name))
+    cfg = _config(args)
+    particles = args.particles or cfg.particles
+    if particles > cfg.particles or particles % cfg.lanes:
+        raise UsageError(f"--particles {particles}: must be a multiple of filter.lanes = "
+                         f"{cfg.lanes} and at most filter.particles = {cfg.particles}")
+    scenario = args.scenario
+    if scenario is not None and not scenario.endswith(".csv"):
+        from gpf.model.study import SCENARIOS
+
+        if scenario not in SCENARIOS or not scenario.startswith(cfg.app):
+            names = [s for s in SCENARIOS if s.startswith(cfg.app)]
+            raise UsageError(f"--scenario {scenario}: choose one of {', '.join(names)} "
+                             "or give a CSV file")
+    steps = args.steps or cfg.steps
+    if scenario is not None and scenario.endswith(".csv"):
+        sc = _scenario_arg(scenario)
+        if sc.app != cfg.app:
+            raise UsageError(f"--scenario {scenario}: a {sc.app} scenario, config "
+                             f"{cfg.name!r} is {cfg.app}")
+        steps = sc.steps if args.steps is None else args.steps
+        if steps != sc.steps:
+            raise UsageError(f"--steps {steps}: the scenario file has {sc.steps} steps")
+    res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves))
+    if args.plot:
+        res["plots"] = plot(res, Path(args.plot))
+    out = Path(args.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=1) + "\n")
+    for line in summary_lines(res):
+        print(line)
+    for path in res.get("plots", []):
+        print(f"  plot: {path}")
+    ok = res["passed"] and res["mismatches"] == 0
+    print(f"  -> {out}: {'PASSED' if ok else 'FAILED'} (log: {res['log']})")
+    return 0 if ok else EXIT_FAILED
+
+
 def cmd_lint(args: argparse.Namespace) -> int:
     from gpf.rtl.lint import lint_configs
 
@@ -273,6 +317,21 @@ def build_parser() -> Parser:
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
     p.set_defaults(func=cmd_sim)
+
+    p = sub.add_parser("run", help="the whole filter in RTL, every particle checked against "
+                       "the model")
+    with_config(p)
+    p.add_argument("--steps", type=int, help="filter steps (default: the config's)")
+    p.add_argument("--particles", type=int, help="N (default: the config's maximum)")
+    p.add_argument("--seed", type=int, default=1,
+                   help="scenario seed and GRNG seed load (default 1)")
+    p.add_argument("--scenario", help="bot_fixed_observer (bot default), "
+                   "bot_manoeuvring_observer, uav_flight (uav default), or a CSV file")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--waves", action="store_true", help="write an FST under build/")
+    p.add_argument("--plot", metavar="DIR", help="write PNGs of the estimates there")
+    p.add_argument("--json", required=True, metavar="OUT")
+    p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")
     p.add_argument("--config", action="append", default=[],

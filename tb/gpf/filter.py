@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,6 @@ import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
 from cocotb.triggers import RisingEdge
-from tqdm import tqdm
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -46,7 +45,7 @@ class RunSpec:
     load_seed: bool = True
     stall: float = 0.0                 # probability of a stall on every stream the tb drives
     out: str | None = None             # results JSON
-    progress: bool = False
+    progress: str | None = None        # a file rewritten after every step: "step mismatches"
 
     @classmethod
     def from_env(cls, **defaults: Any) -> RunSpec:
@@ -140,7 +139,7 @@ class RunResult:
     flags: list[list[str]] = field(default_factory=list)
     rmse: dict[str, float] = field(default_factory=dict)
     estimates: dict[str, list] = field(default_factory=dict)
-    wall_seconds: float = 0.0
+    wall_seconds: float = 0.0   # the simulation and its checks, the build excluded
 
 
 def scenario_of(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario]:
@@ -185,6 +184,7 @@ class FilterBench:
         steps = sc.steps
         res_out = RunResult(steps, gpf.particles, lanes, gpf.cfg.name, cocotb.SIM_NAME,
                             spec.seed, name)
+        began = time.monotonic()
         self.idle()
         await start(d)
         # the model's draws: the GRNG after the same seed load (or after reset)
@@ -212,10 +212,8 @@ class FilterBench:
         feeder = cocotb.start_soon(self.send("s_step", step_words, stall))
         beats = gpf.particles // lanes
         sticky, rtl_mu = 0, [gpf.to_real_mu(mu)]
-        bar = tqdm(range(1, steps + 1), desc=f"gpf_{gpf.dp.app} {gpf.cfg.name} N={gpf.particles}",
-                   unit="step", disable=not spec.progress, file=sys.__stderr__, leave=False)
         limit = 200 * (beats + 1000) * (1 + int(10 * stall))
-        for k in bar:
+        for k in range(1, steps + 1):
             res = gpf.step(mu, chol, sigma, raw_inputs[k - 1], draws[k - 1], keep_particles=True)
             waited = 0
             while len(mons["est"].beats) < k:
@@ -242,7 +240,8 @@ class FilterBench:
                                                     for i in range(gpf.dp.n)])))
             mu, chol, sigma = res.mu, res.chol, res.sigma
             res_out.particles_checked += gpf.particles
-            bar.set_postfix(mismatches=self.mismatches, cycles=res_out.cycles_per_step[-1])
+            if spec.progress:
+                Path(spec.progress).write_text(f"{k} {self.mismatches}\n")
         await feeder
         for _ in range(50):   # nothing more may come out
             await RisingEdge(d.clk)
@@ -260,6 +259,7 @@ class FilterBench:
         res_out.mismatches = self.mismatches
         res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
                                        if b.first_mismatch), None)
+        res_out.wall_seconds = round(time.monotonic() - began, 3)
         res_out.rmse, res_out.estimates = accuracy(gpf, sc, draws, np.array(rtl_mu))
         return res_out
 
