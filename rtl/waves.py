@@ -15,6 +15,7 @@ from gpf.config import Config
 from gpf.model.fixed import Format
 from gpf.model.formats import datapath
 from gpf.rtl.generate import (
+    MODULES,
     cholesky_context,
     cordic_atan2_context,
     exp_context,
@@ -449,6 +450,53 @@ def cholesky_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def _fields(path: str, fields: list, lanes: int = 1, only: set[str] | None = None
+            ) -> list[Trace]:
+    """Traces of the Fields (tb.scoreboard) packed LSB first in `path`, lanes concatenated."""
+    lane_w = sum(f.fmt.width for f in fields)
+    out = []
+    for lane in range(lanes):
+        off = lane * lane_w
+        for f in fields:
+            if only is None or f.name in only:
+                out.append(Trace(path, off + f.fmt.width - 1, off, signed=f.fmt.signed,
+                                 frac_bits=f.fmt.frac_bits,
+                                 label=f"lane{lane} {f.name}" if lanes > 1 else f.name))
+            off += f.fmt.width
+    return out
+
+
+def filter_view(cfg: Config, sim: str) -> list[Group]:
+    """gpf_<app>: the controller, the per-step streams and both debug taps."""
+    from gpf.model.fixed_gpf import FixedGPF
+    from gpf.tb.gpf.filter import streams
+
+    s = streams(FixedGPF(cfg))
+    top = scope(sim, f"gpf_{cfg.app}")
+    handshake = [_bit(f"{top}.{name}_{sig}") for name in ("s_init", "s_step", "m_est")
+                 for sig in ("tvalid", "tready")]
+    mu = {f.name for f in s.est if f.name.startswith("mu")}
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        Group("controller", [
+            Trace(f"{top}.u_ctrl.state_q", 3, 0, label="state (0 idle .. 3 ready, 4 run, "
+                  "5 moments, 6-7 Cholesky, 8 out)", frac_bits=0),
+            Trace(f"{top}.u_ctrl.sent_q", cfg.particles.bit_length() - 1, 0,
+                  label="particles sent", frac_bits=0),
+            Trace(f"{top}.u_ctrl.flags_q", 2, 0, label="flags (NOT_PD, ZERO_WEIGHTS, SAT)"),
+            Trace(f"{top}.u_ctrl.cycles_q", 31, 0, label="clocks this step", frac_bits=0)]
+            + handshake),
+        Group("step input", _fields(f"{top}.s_step_tdata", s.step)),
+        Group("result", _fields(f"{top}.m_est_tdata", s.est, only=mu | {"flags", "cycles"})),
+        Group("conditioning tap", [_bit(f"{top}.m_cond_tvalid"), _bit(f"{top}.m_cond_tready"),
+                                   _bit(f"{top}.m_cond_tlast")]
+              + _fields(f"{top}.m_cond_tdata", s.cond, cfg.lanes)),
+        Group("particle tap", [_bit(f"{top}.m_part_tvalid"), _bit(f"{top}.m_part_tready"),
+                               _bit(f"{top}.m_part_tlast")]
+              + _fields(f"{top}.m_part_tdata", s.part, cfg.lanes)),
+    ]
+
+
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
 VIEWS.update(sqrt=sqrt_view, recip=recip_view)
 VIEWS.update(cordic_atan2=cordic_atan2_view)
@@ -457,6 +505,7 @@ VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 VIEWS.update(moments=moments_view)
 VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
 VIEWS.update(cholesky=cholesky_view)
+VIEWS.update(gpf_bot=filter_view, gpf_uav=filter_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:
@@ -465,8 +514,10 @@ def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build
 
 def write_view(cfg: Config, module: str, sim: str, fst: Path) -> Path:
     gtkw = fst.with_suffix(".gtkw")
-    # open on the first 24 clocks: reset, pipeline fill, the first samples readable
-    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim), window_ps=24 * CLOCK_NS * 1000)
+    # open on the first 24 clocks: reset, pipeline fill, the first samples readable (a whole
+    # filter: its first step)
+    clocks = 400 if MODULES[module].is_filter else 24
+    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim), window_ps=clocks * CLOCK_NS * 1000)
     return gtkw
 
 
