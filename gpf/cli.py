@@ -175,8 +175,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     note = ""
     module = args.module
     if module is None:
-        module = "grng"
-        note = " (the whole filter is not built yet: running the GRNG)"
+        module = f"gpf_{cfg.app}"
+        note = " (the whole filter's testbench; `gpf run` for a long run with a summary)"
     module = _module(module, cfg)
     print(f"gpf sim: {module} on {args.sim}, config {cfg.name}{note}", flush=True)
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
@@ -257,7 +257,8 @@ def cmd_waves(args: argparse.Namespace) -> int:
     from gpf.rtl.waves import open_waves
 
     cfg = _config(args)
-    return open_waves(cfg, _module(args.module, cfg), args.sim, launch=not args.no_launch)
+    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    return open_waves(cfg, module, args.sim, launch=not args.no_launch)
 
 
 def build_parser() -> Parser:
@@ -345,7 +346,7 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
     with_config(p)
-    p.add_argument("--module", default="grng")
+    p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
     p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
     p.add_argument("--no-launch", action="store_true", help="write the .gtkw, do not open it")
     p.set_defaults(func=cmd_waves)

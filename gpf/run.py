@@ -86,7 +86,7 @@ def _progress(path: Path) -> tuple[int, int] | None:
 def summary_lines(res: dict[str, Any]) -> list[str]:
     cycles = res["cycles_per_step"]
     rmse = res["rmse"]
-    unit = "m" if res["config"].startswith("bot") or "observer" in res["estimates"] else "deg"
+    unit = "m" if "observer" in res["estimates"] else "deg"
     lines = [
         f"gpf run: {res['config']} on {res['sim']}, scenario {res['scenario']}, seed "
         f"{res['seed']}: {res['steps']} steps x {res['particles']} particles "
@@ -94,7 +94,8 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
         f"  particles checked {res['particles_checked']} (conditioning, propagated, weight), "
         f"values checked {res['values_checked']}, mismatches {res['mismatches']}",
         f"  RMSE ({unit}) rtl {rmse['rtl']:.6g}, fixed {rmse['fixed']:.6g}, float "
-        f"{rmse['float']:.6g}",
+        f"{rmse['float']:.6g}; rtl vs float64 (same draws) per step: max "
+        f"{max(res['quantisation_error']):.3g} {unit}",
         f"  cycles per step: min {min(cycles)}, max {max(cycles)} (N/LANES + "
         f"{max(cycles) - res['particles'] // res['lanes']})",
         f"  {res['particles_per_second']:.0f} particles checked/s ({res['wall_seconds']:.1f} s "

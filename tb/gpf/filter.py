@@ -138,6 +138,7 @@ class RunResult:
     period_per_step: list[int] = field(default_factory=list)  # clocks between result beats
     flags: list[list[str]] = field(default_factory=list)
     rmse: dict[str, float] = field(default_factory=dict)
+    quantisation_error: list[float] = field(default_factory=list)  # rtl vs float64, per step
     estimates: dict[str, list] = field(default_factory=dict)
     wall_seconds: float = 0.0   # the simulation and its checks, the build excluded
 
@@ -260,7 +261,8 @@ class FilterBench:
         res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
                                        if b.first_mismatch), None)
         res_out.wall_seconds = round(time.monotonic() - began, 3)
-        res_out.rmse, res_out.estimates = accuracy(gpf, sc, draws, np.array(rtl_mu))
+        res_out.rmse, res_out.quantisation_error, res_out.estimates = accuracy(
+            gpf, sc, draws, np.array(rtl_mu))
         return res_out
 
     @property
@@ -269,9 +271,10 @@ class FilterBench:
 
 
 def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray
-             ) -> tuple[dict[str, float], dict[str, list]]:
+             ) -> tuple[dict[str, float], list[float], dict[str, list]]:
     """RMSE over steps k >= 1 of the RTL's, the fixed-point model's and the float64 model's
-    estimates (the float one driven by the same draws), and the estimates themselves."""
+    estimates (the float one driven by the same draws), the RTL's distance from the float64
+    estimate per step (its quantisation error: m for bot, degrees for uav), the estimates."""
     from gpf.model.fixed_gpf import run
 
     fixed = run(gpf, sc, draws=draws)
@@ -279,11 +282,12 @@ def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray
     app = gpf.dp.app
     rmse = {name: float(math.sqrt(np.mean(error_per_step(app, est, sc.truth)[1:] ** 2)))
             for name, est in (("float", floating.mu), ("fixed", fixed.mu), ("rtl", rtl_mu))}
+    quantisation = error_per_step(app, rtl_mu, floating.mu)[1:].tolist()
     estimates = {"truth": sc.truth.tolist(), "float": floating.mu.tolist(),
                  "fixed": fixed.mu.tolist(), "rtl": rtl_mu.tolist()}
     if app == "bot":
         estimates["observer"] = sc.inputs["observer"].tolist()
-    return rmse, estimates
+    return rmse, quantisation, estimates
 
 
 def write_result(res: RunResult, path: str | None) -> None:
