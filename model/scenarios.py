@@ -82,14 +82,17 @@ class Scenario:
         return out
 
 
-def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str) -> Scenario:
-    """Truth x_0 ~ N(x0, diag(sigma0_diag)) (x0 is the seed's initial *mean*), then
-    x_k = Phi x_{k-1} + Gamma w; bearings with noise N(0, R) seen from observer[k]."""
+def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str,
+         x0: Array | None = None) -> Scenario:
+    """Truth x_0 ~ N(x0, diag(sigma0_diag)) (x0 is the seed's initial *mean*, the config's
+    unless given), then x_k = Phi x_{k-1} + Gamma w; bearings with noise N(0, R) seen from
+    observer[k]."""
     p = cfg.app_params
+    x0 = np.array(p["x0"] if x0 is None else x0, dtype=float)
     rng = np.random.default_rng(seed)
     phi, gamma = bot_matrices(cfg.dt)
     truth = np.empty((steps + 1, 4))
-    truth[0] = np.array(p["x0"]) + np.sqrt(np.array(p["sigma0_diag"])) * rng.standard_normal(4)
+    truth[0] = x0 + np.sqrt(np.array(p["sigma0_diag"])) * rng.standard_normal(4)
     w = math.sqrt(p["process_var"]) * rng.standard_normal((steps, 2))
     for k in range(1, steps + 1):
         truth[k] = phi @ truth[k - 1] + gamma @ w[k - 1]
@@ -98,7 +101,7 @@ def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str) -> Scenari
     rel = truth[1:, [0, 2]] - observer[1:]
     z[1:] = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) + noise)
     return Scenario("bot", cfg.dt, np.arange(steps + 1) * cfg.dt, {"observer": observer},
-                    {"z": z}, truth, np.array(p["x0"], dtype=float),
+                    {"z": z}, truth, x0,
                     {"generator": name, "seed": int(seed), "config": cfg.name})
 
 
@@ -290,3 +293,43 @@ def _read_header(path: Path, ln: int, text: str) -> str:
     want = repr(names[j]) if j < len(names) else "no more columns"
     raise ValueError(f"{path}: line {ln} (header), column {j + 1}: {got}, expected {want} "
                      f"({app} columns: {','.join(names)})")
+
+
+# ---- fault scenarios: situations the filter must flag and survive (README, "Faults") -------
+FAULT_STEP = 3   # the step with the fault (or the last step of a shorter run)
+
+
+def _fault_step(steps: int) -> int:
+    return min(FAULT_STEP, steps)
+
+
+def bot_outlier(cfg: Any, steps: int, seed: int) -> Scenario:
+    """bot_fixed_observer with one bearing a quarter turn off at step FAULT_STEP: every
+    particle's weight underflows to 0 (flag ZERO_WEIGHTS, the prediction kept); the bearings
+    after it are normal again."""
+    sc = bot_fixed_observer(cfg, steps, seed)
+    k = _fault_step(steps)
+    sc.measurements["z"][k] = wrap_angle(sc.measurements["z"][k] + math.pi / 2)
+    sc.meta.update(generator="bot_outlier", fault_step=k)
+    return sc
+
+
+def uav_gps_glitch(cfg: Any, steps: int, seed: int) -> Scenario:
+    """uav_flight with the GPS velocity 5 m/s off (250 sigma) at step FAULT_STEP: every weight
+    underflows (ZERO_WEIGHTS); normal fixes follow."""
+    sc = uav_flight(cfg, steps, seed)
+    k = _fault_step(steps)
+    sc.measurements["v_gps"][k] += np.array([5.0, 0.0, 0.0])
+    sc.meta.update(generator="uav_gps_glitch", fault_step=k)
+    return sc
+
+
+def bot_far_target(cfg: Any, steps: int, seed: int) -> Scenario:
+    """A target 6 m inside the edge of the position format, moving out at 3 m/s: positions
+    saturate (flag SAT) from about step 2 on, and the filter keeps running."""
+    edge = float(cfg.formats["state"].max_real)
+    x0 = np.array(cfg.app_params["x0"], dtype=float)
+    x0[0], x0[1] = edge - 6.0, 3.0
+    observer = np.zeros((steps + 1, 2))
+    observer[0] = np.nan
+    return _bot(cfg, steps, seed, observer, "bot_far_target", x0)

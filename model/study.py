@@ -27,6 +27,10 @@ SCENARIOS: dict[str, Callable[..., scenarios.Scenario]] = {
     "bot_fixed_observer": scenarios.bot_fixed_observer,
     "bot_manoeuvring_observer": scenarios.bot_manoeuvring_observer,
     "uav_flight": scenarios.uav_flight,
+    # faults: flagged and survived
+    "bot_outlier": scenarios.bot_outlier,
+    "uav_gps_glitch": scenarios.uav_gps_glitch,
+    "bot_far_target": scenarios.bot_far_target,
 }
 DEFAULT_SCENARIO = {"bot": "bot_fixed_observer", "uav": "uav_flight"}
 

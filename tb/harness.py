@@ -53,6 +53,11 @@ async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = Fa
     With hold_reset the reset is still high on return (the caller releases it and counts).
     """
     cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns").start())
+    await reset(dut, reset_cycles, hold_reset)
+
+
+async def reset(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = False) -> None:
+    """The synchronous reset for a few cycles of a running clock."""
     dut.rst.value = 1
     await ClockCycles(dut.clk, reset_cycles)
     if not hold_reset:

@@ -30,23 +30,26 @@ RUNS = [("bot", "verilator", 1, 5, 512), ("odd", "verilator", 2, 5, 512),
         ("bot", "icarus", 1, 3, 64), ("uav", "icarus", 2, 3, 64)]
 
 
-def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int,
-               seed: int) -> tuple[object, dict]:
+def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, seed: int,
+               scenario: str | None = None, testcase: str | None = None,
+               build_root: Path = Path("build")) -> tuple[object, dict]:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
     module = f"gpf_{cfg.app}"
-    out = Path("build") / cfg.name / sim / module / "regression.json"
+    out = (build_root / cfg.name / sim / module / "regression.json").resolve()
     out.unlink(missing_ok=True)
-    spec = {"steps": steps, "particles": particles, "seed": seed, "out": str(out.resolve())}
-    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10
-    result = run_sim(cfg, module, sim, waves=waves, seed=seed,
-                     extra_env={"GPF_RUN": json.dumps(spec)},
-                     log_file=Path("build") / cfg.name / f"{module}-{sim}.log")
+    spec = {"steps": steps, "particles": particles, "seed": seed, "out": str(out),
+            "scenario": scenario}
+    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10 \
+        and scenario is None
+    result = run_sim(cfg, module, sim, waves=waves, seed=seed, testcase=testcase,
+                     extra_env={"GPF_RUN": json.dumps(spec)}, build_root=build_root,
+                     log_file=build_root / cfg.name / f"{module}-{sim}.log")
     return result, json.loads(out.read_text()) if out.exists() else {}
 
 
-def check_run(result, res: dict, steps: int, particles: int, lanes: int) -> None:
+def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: int = 4) -> None:
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
-    assert result.tests == 3                     # filter, stalls, corrupted model
+    assert result.tests == tests        # filter, stalls, reset mid-step, corrupted model
     assert res["mismatches"] == 0 and res["particles_checked"] == steps * particles
     assert len(res["cycles_per_step"]) == steps
     assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]
@@ -88,17 +91,61 @@ def test_gpf_run_cli(tmp_path: Path, capsys) -> None:
     assert "mismatches 0" in text and "cycles per step" in text
 
 
+# Faults (SPEC 10): (config, scenario, lanes, particles, simulator, the flags expected at each
+# step 1..5). RTL and model must agree on estimates and flags (mismatches 0) and the filter must
+# run to the end; the flags expected here follow from how each scenario is built.
+ZW, SAT, NPD = "zero_weights", "sat", "not_pd"
+FAULTS = {
+    # one bearing a quarter turn off at step 3: every weight 0 there, normal again after
+    "bot-outlier": ("bot", "bot_outlier", 1, 128, "verilator", [[], [], [ZW], [], []]),
+    "bot-outlier-icarus": ("odd", "bot_outlier", 2, 64, "icarus", [[], [], [ZW], [], []]),
+    "uav-gps-glitch": ("uav", "uav_gps_glitch", 2, 128, "verilator", [[], [], [ZW], [], []]),
+    # positions beyond the format from step 2: saturated, then a collapsed (singular) spread
+    "bot-far-target": ("bot", "bot_far_target", 1, 128, "verilator",
+                       [[], [SAT], [SAT, NPD], [SAT, NPD], [SAT, NPD]]),
+    # two particles: a rank-1 covariance every step
+    "uav-two-particles": ("uav_seed002", "uav_flight", 1, 2, "verilator", [[NPD]] * 5),
+}
+
+
+@pytest.mark.parametrize("fault", [pytest.param(f, marks=SIM_MARKS[FAULTS[f][4]])
+                                   for f in FAULTS])
+def test_fault_flagged_and_survived(tmp_path: Path, fault: str) -> None:
+    config, scenario, lanes, particles, sim, flags = FAULTS[fault]
+    result, res = filter_run(config, sim, lanes, 5, particles, seed=1, scenario=scenario,
+                             testcase="test_filter", build_root=tmp_path)
+    check_run(result, res, 5, particles, lanes, tests=1)
+    assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
+
+
+# (module, template, text, replacement, scenario): blocks' mutants the whole filter must catch
+# as well, and the controller's own
+FILTER_MUTANTS = {
+    "moments-reference": (*MUTANTS["moments-reference"], None),
+    "moments-mean-rounding": (*MUTANTS["moments-mean-rounding"], None),
+    "ctrl-result-reset": ("ctrl", "ctrl.sv.j2", "      est_q <= '0;\n", "", None),  # X
+    "ctrl-zero-weights-keep": ("ctrl", "ctrl.sv.j2", "              sigma_new_q <= sigma_q;",
+                               "              sigma_new_q <= s_mom_tdata[MUW +: SIGW];",
+                               "bot_outlier"),
+    "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "            sticky_q <= sticky_q | flags_q;",
+                    "            sticky_q <= flags_q;", "bot_outlier"),
+}
+
+
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
-@pytest.mark.parametrize("mutant", ["moments-reference", "moments-mean-rounding"])
-def test_block_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
-    module, template, old, new = MUTANTS[mutant]
+@pytest.mark.parametrize("mutant", list(FILTER_MUTANTS))
+def test_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
+    module, template, old, new, scenario = FILTER_MUTANTS[mutant]
     templates = tmp_path / "templates"
     shutil.copytree(TEMPLATE_DIR, templates)
     path = templates / template
-    path.write_text(path.read_text().replace(old, new))
+    text = path.read_text()
+    assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
+    path.write_text(text.replace(old, new))
+    spec = {"steps": 5, "particles": 32, "scenario": scenario} if scenario else {}
     result = run_sim(load_config("configs/bot.toml"), "gpf_bot", "icarus", seed=1,
                      testcase="test_filter", template_dir=templates,
                      build_root=tmp_path / "build", log_file=tmp_path / "sim.log",
-                     extra_env={"TEST_LEVEL": "short"})
+                     extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
     assert result.tests == 1
     assert result.failed == 1, f"mutant {mutant} of {module} survived the whole filter"

@@ -19,7 +19,7 @@ from typing import Any
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import RisingEdge
+from cocotb.triggers import ReadOnly, RisingEdge
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -28,10 +28,13 @@ from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
 from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_names
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
-from gpf.tb.harness import Bench, start
+from gpf.tb.harness import Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
 
+# every output port of gpf_<app>: defined (no X or Z) from reset on
+OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
+    f"m_{tap}_{sig}" for tap in ("cond", "part") for sig in ("tvalid", "tdata", "tlast")]
 FLAGS = Format.parse("u3.0")
 SAT = Format.parse("u1.0")
 
@@ -109,7 +112,8 @@ def expected_taps(res: StepResult, lanes: int) -> tuple[dict, dict]:
     n = t["cond"].shape[1]
     cond = {f"x{i}": beats(t["cond"][:, i]) for i in range(n)} | {"sat": beats(t["cond_sat"])}
     part = {f"x{i}": beats(t["prop"][:, i]) for i in range(n)}
-    part |= {"w": beats(t["weight"]), "sat": beats(t["prop_sat"] | t["weight_sat"])}
+    # the tap shows weight's own sat; propagate's reach the step's flags only
+    part |= {"w": beats(t["weight"]), "sat": beats(t["weight_sat"])}
     return cond, part
 
 
@@ -159,6 +163,7 @@ class FilterBench:
         self.gpf = FixedGPF(b.cfg, particles=spec.particles)
         self.s = streams(self.gpf)
         self.corrupt = corrupt
+        self.clock_running = False
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
                                         expect_mismatch=corrupt)
                        for name, fields in (("cond", self.s.cond), ("part", self.s.part),
@@ -178,6 +183,52 @@ class FilterBench:
                            has_last=False)
         await drv.send([(word, False) for word in words])
 
+    async def begin(self) -> None:
+        """Idle inputs, then the clock (once) and a reset; every output defined after it."""
+        self.idle()
+        if self.clock_running:
+            await reset(self.dut)
+        else:
+            await start(self.dut)
+            self.clock_running = True
+        await ReadOnly()
+        undefined = [port for port in OUTPUTS
+                     if not getattr(self.dut, port).value.is_resolvable]
+        assert not undefined, f"X or Z after reset on {', '.join(undefined)}"
+        await RisingEdge(self.dut.clk)
+
+    async def interrupted_step(self) -> None:
+        """Seed, init, and a step reset half-way through its particles (taps stalled now and
+        then): what follows must start clean."""
+        d, gpf = self.dut, self.gpf
+        await self.begin()
+        await self.send("s_seed", seed_words(self.spec.seed + 1, gpf.dp.draws() * gpf.cfg.lanes))
+        _, sc = scenario_of(gpf, self.spec)
+        mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
+        await self.send("s_init", [one_beat(self.s.init, self.init_values(mu0, sigma0))])
+        raw = gpf.quantise_inputs(sc.step_inputs(1))
+        feeder = cocotb.start_soon(self.send("s_step", [one_beat(self.s.step,
+                                                                 step_values(gpf, raw))]))
+        cond = StreamMonitor(d.clk, d, "m_cond", has_last=True)
+        ready = ReadyDriver(d.clk, d.m_part_tready, 0.3, self.b.rng("interrupt"))
+        half = gpf.particles // gpf.cfg.lanes // 2
+        while len(cond.beats) < half:
+            await RisingEdge(d.clk)
+        feeder.cancel()
+        ready.stop()
+        cond.stop()
+
+    def init_values(self, mu0: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
+        gpf = self.gpf
+        mu, _ = gpf.init(mu0, sigma0)
+        out = {"particles": gpf.particles} | {f"mu{i}": int(v) for i, v in enumerate(mu)}
+        return out | {f"s{i}_{j}": v for (i, j), v in self.sigma0(sigma0).items()}
+
+    def sigma0(self, sigma0: np.ndarray) -> dict[tuple[int, int], int]:
+        frac = self.gpf.dp.cov_frac
+        return {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** frac(i, j) + 0.5)
+                for i, j in self.gpf.pairs}
+
     async def run(self) -> RunResult:
         d, spec, gpf, s = self.dut, self.spec, self.gpf, self.s
         lanes = gpf.cfg.lanes
@@ -186,24 +237,20 @@ class FilterBench:
         res_out = RunResult(steps, gpf.particles, lanes, gpf.cfg.name, cocotb.SIM_NAME,
                             spec.seed, name)
         began = time.monotonic()
-        self.idle()
-        await start(d)
+        await self.begin()
         # the model's draws: the GRNG after the same seed load (or after reset)
         draws = gpf.draws(steps, spec.seed if spec.load_seed else None)
         if self.corrupt:   # the broken model: conditioning draws in the wrong order
             draws = draws.copy()
             draws[:, :, : gpf.dp.n] = draws[:, :, gpf.dp.n - 1:: -1]
+        stall = spec.stall
         if spec.load_seed:
-            await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes))
+            await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes), stall)
         mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
         mu, chol = gpf.init(mu0, sigma0)
-        sigma = {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** gpf.dp.cov_frac(i, j) + 0.5)
-                 for i, j in gpf.pairs}
-        init = {"particles": gpf.particles} | {f"mu{i}": int(v) for i, v in enumerate(mu)}
-        init |= {f"s{i}_{j}": v for (i, j), v in sigma.items()}
-        await self.send("s_init", [one_beat(s.init, init)])
+        sigma = self.sigma0(sigma0)
+        await self.send("s_init", [one_beat(s.init, self.init_values(mu0, sigma0))], stall)
 
-        stall = spec.stall
         mons = {k: StreamMonitor(d.clk, d, f"m_{k}", has_last=(k != "est"))
                 for k in ("cond", "part", "est")}
         readies = [ReadyDriver(d.clk, getattr(d, f"m_{k}_tready"), stall,
