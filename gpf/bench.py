@@ -51,7 +51,7 @@ def cycles_table(config: str, steps: int = 2) -> tuple[list[str], dict]:
     return lines, rows
 
 
-def speed_table(config: str = "bot", particles: int = 512, steps: int = 2
+def speed_table(config: str = "bot", particles: int = 1024, steps: int = 4
                 ) -> tuple[list[str], dict]:
     speed = {sim: _run(config, 1, particles, steps, sim)["particles_per_second"]
              for sim in ("verilator", "icarus")}
