@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import cocotb
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ReadOnly, RisingEdge
+from cocotb.triggers import Event, ReadOnly, RisingEdge
 
 
 @dataclass
@@ -106,3 +106,56 @@ class StreamDriver:
                 if taken:
                     break
         self.tvalid.value = 0
+
+
+class StreamSinks:
+    """Several AXI4-Stream outputs read by ONE coroutine per clock: each clock it draws every
+    `tready` (low with probability `stall`), then samples after the edge settles and records the
+    beats that crossed (tvalid && tready) in `beats[name]`. One coroutine instead of a monitor and
+    a ready driver per stream: cocotb's per-clock wake-ups set the pace of long runs.
+    `arrived(name, count)` waits (in simulated time, without polling) until `count` beats of
+    `name` have crossed."""
+
+    def __init__(self, clk: SimHandleBase, prefix: SimHandleBase, names: list[str],
+                 has_last: dict[str, bool], stall: float, rng: random.Random):
+        self.clk, self.stall, self.rng = clk, stall, rng
+        self.ports = [(name, getattr(prefix, f"{name}_tvalid"), getattr(prefix, f"{name}_tready"),
+                       getattr(prefix, f"{name}_tdata"),
+                       getattr(prefix, f"{name}_tlast") if has_last.get(name) else None)
+                      for name in names]
+        self.beats: dict[str, list[Beat]] = {name: [] for name in names}
+        self.cycles = 0
+        self._events = {name: Event() for name in names}
+        self._ready = [1] * len(names)
+        for _, _, tready, _, _ in self.ports:
+            tready.value = 1
+        self._task = cocotb.start_soon(self._run())
+
+    async def _run(self) -> None:
+        edge, settle = RisingEdge(self.clk), ReadOnly()
+        while True:
+            await edge
+            if self.stall:
+                for i, (_, _, tready, _, _) in enumerate(self.ports):
+                    ready = 0 if self.rng.random() < self.stall else 1
+                    if ready != self._ready[i]:
+                        tready.value = ready
+                        self._ready[i] = ready
+            await settle
+            self.cycles += 1
+            for i, (name, tvalid, _, tdata, tlast) in enumerate(self.ports):
+                if self._ready[i] and tvalid.value == 1:
+                    last = bool(tlast.value) if tlast is not None else False
+                    # to_unsigned() raises on X or Z: an undefined output is an error, not a 0
+                    self.beats[name].append(Beat(tdata.value.to_unsigned(), self.cycles, last))
+                    self._events[name].set()
+
+    async def arrived(self, name: str, count: int) -> None:
+        while len(self.beats[name]) < count:
+            self._events[name].clear()
+            await self._events[name].wait()
+
+    def stop(self) -> None:
+        self._task.cancel()
+        for _, _, tready, _, _ in self.ports:
+            tready.value = 1

@@ -19,7 +19,7 @@ from typing import Any
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ReadOnly, RisingEdge
+from cocotb.triggers import ReadOnly, RisingEdge, SimTimeoutError, with_timeout
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -28,9 +28,9 @@ from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
 from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_names
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
-from gpf.tb.harness import Bench, reset, start
+from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
-from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
+from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor, StreamSinks
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
 OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
@@ -251,10 +251,9 @@ class FilterBench:
         sigma = self.sigma0(sigma0)
         await self.send("s_init", [one_beat(s.init, self.init_values(mu0, sigma0))], stall)
 
-        mons = {k: StreamMonitor(d.clk, d, f"m_{k}", has_last=(k != "est"))
-                for k in ("cond", "part", "est")}
-        readies = [ReadyDriver(d.clk, getattr(d, f"m_{k}_tready"), stall,
-                               self.b.rng(f"ready-{k}")) for k in mons] if stall else []
+        taps = StreamSinks(d.clk, d, ["m_cond", "m_part", "m_est"],
+                           {"m_cond": True, "m_part": True}, stall, self.b.rng("ready"))
+        mons = {k: taps.beats[f"m_{k}"] for k in ("cond", "part", "est")}
         raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
         feeder = cocotb.start_soon(self.send("s_step", step_words, stall))
@@ -263,22 +262,21 @@ class FilterBench:
         limit = 200 * (beats + 1000) * (1 + int(10 * stall))
         for k in range(1, steps + 1):
             res = gpf.step(mu, chol, sigma, raw_inputs[k - 1], draws[k - 1], keep_particles=True)
-            waited = 0
-            while len(mons["est"].beats) < k:
-                await RisingEdge(d.clk)
-                waited += 1
-                assert waited < limit, f"step {k}: no result after {waited} clocks"
+            try:
+                await with_timeout(taps.arrived("m_est", k), limit * CLOCK_NS, "ns")
+            except SimTimeoutError:
+                raise AssertionError(f"step {k}: no result after {limit} clocks") from None
             exp_cond, exp_part = expected_taps(res, lanes)
             lo, hi = (k - 1) * beats, k * beats
             for tap, exp, fields in (("cond", exp_cond, s.cond), ("part", exp_part, s.part)):
-                got = mons[tap].beats[lo:hi]
+                got = mons[tap][lo:hi]
                 assert len(got) == beats, f"step {k}: {len(got)} {tap} beats, expected {beats}"
                 lasts = [bt.last for bt in got]
                 assert lasts == [False] * (beats - 1) + [True], f"step {k}: {tap} tlast wrong"
                 self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes),
                                          first_beat=lo)
             sticky |= res.flags
-            est = unpack([mons["est"].beats[k - 1].data], s.est, 1)
+            est = unpack([mons["est"][k - 1].data], s.est, 1)
             exp_est = expected_est(s, res, sticky)
             exp_est["cycles"] = est["cycles"]   # the count is checked against the period below
             self.boards["est"].compare(exp_est, est, first_beat=k - 1)
@@ -293,14 +291,11 @@ class FilterBench:
         await feeder
         for _ in range(50):   # nothing more may come out
             await RisingEdge(d.clk)
-        for r in readies:
-            r.stop()
-        for m in mons.values():
-            m.stop()
-        assert len(mons["est"].beats) == steps, "extra result beats"
-        assert len(mons["cond"].beats) == len(mons["part"].beats) == steps * beats, \
+        taps.stop()
+        assert len(mons["est"]) == steps, "extra result beats"
+        assert len(mons["cond"]) == len(mons["part"]) == steps * beats, \
             "extra tap beats"
-        est_cycles = [bt.cycle for bt in mons["est"].beats]
+        est_cycles = [bt.cycle for bt in mons["est"]]
         res_out.period_per_step = [b - a for a, b in zip(est_cycles, est_cycles[1:],
                                                          strict=False)]
         res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
