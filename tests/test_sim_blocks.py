@@ -151,16 +151,22 @@ MUTANTS = {
 }
 
 
-@pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
-@pytest.mark.parametrize("mutant", list(MUTANTS))
-def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
-    module, template, old, new = MUTANTS[mutant]
+def mutated_templates(tmp_path: Path, mutant: str, template: str, old: str, new: str) -> Path:
+    """A copy of the templates with `old` replaced by `new` (once) in `template`."""
     templates = tmp_path / "templates"
     shutil.copytree(TEMPLATE_DIR, templates)
     path = templates / template
     text = path.read_text()
     assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
     path.write_text(text.replace(old, new))
+    return templates
+
+
+@pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
+@pytest.mark.parametrize("mutant", list(MUTANTS))
+def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
+    module, template, old, new = MUTANTS[mutant]
+    templates = mutated_templates(tmp_path, mutant, template, old, new)
     config = "bot" if "bot" in BLOCKS[module].apps else "uav"   # the module's application
     # TEST_LEVEL=short: each mutant was seen to fail at the default level too
     result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,

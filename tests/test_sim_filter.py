@@ -13,11 +13,10 @@ import shutil
 from pathlib import Path
 
 import pytest
-from test_sim_blocks import MUTANTS, SIM_MARKS, waves_possible
+from test_sim_blocks import MUTANTS, SIM_MARKS, mutated_templates, waves_possible
 
 from gpf.cli import main as gpf_main
 from gpf.config import load_config
-from gpf.rtl.generate import TEMPLATE_DIR
 from gpf.sim import run_sim
 from gpf.toolchain import icarus_missing
 
@@ -138,12 +137,7 @@ FILTER_MUTANTS = {
 @pytest.mark.parametrize("mutant", list(FILTER_MUTANTS))
 def test_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
     module, template, old, new, scenario = FILTER_MUTANTS[mutant]
-    templates = tmp_path / "templates"
-    shutil.copytree(TEMPLATE_DIR, templates)
-    path = templates / template
-    text = path.read_text()
-    assert text.count(old) == 1, f"mutant {mutant}: '{old}' not found once in {template}"
-    path.write_text(text.replace(old, new))
+    templates = mutated_templates(tmp_path, mutant, template, old, new)
     spec = {"steps": 5, "particles": 32, "scenario": scenario} if scenario else {}
     result = run_sim(load_config("configs/bot.toml"), "gpf_bot", "icarus", seed=1,
                      testcase="test_filter", template_dir=templates,
