@@ -48,9 +48,9 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
     return result, json.loads(out.read_text()) if out.exists() else {}
 
 
-def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: int = 4) -> None:
+def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: int = 5) -> None:
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
-    assert result.tests == tests        # filter, stalls, reset mid-step, corrupted model
+    assert result.tests == tests   # filter, stalls, reset mid-step, bad N, corrupted model
     assert res["mismatches"] == 0 and res["particles_checked"] == steps * particles
     assert len(res["cycles_per_step"]) == steps
     assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]

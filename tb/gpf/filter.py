@@ -46,6 +46,7 @@ class RunSpec:
     scenario: str | None = None        # a scenario name or a CSV file (default: the app's)
     seed: int = 1                      # scenario seed and GRNG seed load (None: reset state)
     load_seed: bool = True
+    init_particles: int | None = None  # the N the init beat carries (default: particles)
     stall: float = 0.0                 # probability of a stall on every stream the tb drives
     out: str | None = None             # results JSON
     progress: str | None = None        # a file rewritten after every step: "step mismatches"
@@ -158,12 +159,13 @@ def scenario_of(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario]:
 class FilterBench:
     """Drives gpf_<app> through a run and scores every stream against the model."""
 
-    def __init__(self, dut: SimHandleBase, b: Bench, spec: RunSpec, corrupt: bool = False):
+    def __init__(self, dut: SimHandleBase, b: Bench, spec: RunSpec, corrupt: bool = False,
+                 clock_running: bool = False):
         self.dut, self.b, self.spec = dut, b, spec
         self.gpf = FixedGPF(b.cfg, particles=spec.particles)
         self.s = streams(self.gpf)
         self.corrupt = corrupt
-        self.clock_running = False
+        self.clock_running = clock_running   # another bench of this test started the clock
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
                                         expect_mismatch=corrupt)
                        for name, fields in (("cond", self.s.cond), ("part", self.s.part),
@@ -221,7 +223,9 @@ class FilterBench:
     def init_values(self, mu0: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
         gpf = self.gpf
         mu, _ = gpf.init(mu0, sigma0)
-        out = {"particles": gpf.particles} | {f"mu{i}": int(v) for i, v in enumerate(mu)}
+        sent = self.spec.init_particles
+        out = {"particles": gpf.particles if sent is None else sent}
+        out |= {f"mu{i}": int(v) for i, v in enumerate(mu)}
         return out | {f"s{i}_{j}": v for (i, j), v in self.sigma0(sigma0).items()}
 
     def sigma0(self, sigma0: np.ndarray) -> dict[tuple[int, int], int]:

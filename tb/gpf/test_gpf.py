@@ -19,7 +19,7 @@ from gpf.tb.gpf.filter import FilterBench, RunSpec, write_result
 from gpf.tb.harness import bench
 
 
-def check(res, bench_: FilterBench) -> None:
+def check(res) -> None:
     assert res.particles_checked == res.steps * res.particles
     assert res.mismatches == 0, f"{res.mismatches} mismatches; first: {res.first_mismatch}"
 
@@ -34,7 +34,7 @@ async def test_filter(dut: SimHandleBase) -> None:
     dut._log.info("%d steps x %d particles: %d values checked, %d mismatches; cycles %s",
                   res.steps, res.particles, res.values_checked, res.mismatches,
                   res.cycles_per_step)
-    check(res, fb)
+    check(res)
     if not spec.stall:   # with nothing stalled, a step's count is the period of dependent steps
         assert res.period_per_step == res.cycles_per_step[1:], \
             f"periods {res.period_per_step}, counts {res.cycles_per_step}"
@@ -49,7 +49,7 @@ async def test_stalls(dut: SimHandleBase) -> None:
     res = await fb.run()
     dut._log.info("stalls 0.5: %d values checked, %d mismatches", res.values_checked,
                   res.mismatches)
-    check(res, fb)
+    check(res)
 
 
 @cocotb.test()
@@ -61,7 +61,23 @@ async def test_reset_mid_step(dut: SimHandleBase) -> None:
     fb = FilterBench(dut, b, spec)
     await fb.interrupted_step()
     res = await fb.run()
-    check(res, fb)
+    check(res)
+
+
+@cocotb.test()
+async def test_particle_count_out_of_range(dut: SimHandleBase) -> None:
+    """An init with N outside [LANES, the config's maximum] runs the nearest count (N = 0:
+    LANES particles, N too large: the maximum), one not a multiple of LANES the next multiple."""
+    b = bench()
+    lanes, most = b.cfg.lanes, b.cfg.particles
+    width = most.bit_length()
+    cases = [(0, lanes), ((1 << width) - 1, most)] + ([(lanes + 1, 2 * lanes)] if lanes > 1
+                                                        else [])
+    for case, (sent, runs) in enumerate(cases):
+        spec = RunSpec(steps=1, particles=runs, init_particles=sent, seed=b.seed % 1000 + 2)
+        res = await FilterBench(dut, b, spec, clock_running=case > 0).run()
+        check(res)
+        dut._log.info("init N = %d: ran %d particles", sent, res.particles)
 
 
 @cocotb.test()
