@@ -162,6 +162,9 @@ class FilterBench:
     def __init__(self, dut: SimHandleBase, b: Bench, spec: RunSpec, corrupt: bool = False,
                  clock_running: bool = False):
         self.dut, self.b, self.spec = dut, b, spec
+        if (spec.particles or 0) > b.cfg.particles:
+            raise ValueError(f"particles = {spec.particles}: more than the config's maximum "
+                             f"filter.particles = {b.cfg.particles}")
         self.gpf = FixedGPF(b.cfg, particles=spec.particles)
         self.s = streams(self.gpf)
         self.corrupt = corrupt
