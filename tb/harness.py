@@ -59,7 +59,7 @@ async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = Fa
 
     With hold_reset the reset is still high on return (the caller releases it and counts).
     """
-    cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns").start())
+    cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns", impl="gpi").start())
     dut.rst.value = 1
     await ClockCycles(dut.clk, reset_cycles)
     if not hold_reset:
