@@ -152,24 +152,27 @@ class Source:
             while self.rng.random() < self.idle:
                 self._gap += 1
             self._state = "gap"
-        if self._state == "gap":
-            if self._gap or (beat := next(self._todo, None)) is None:
-                if self._gap:
-                    self._gap -= 1
-                else:
-                    self._state = "done"
-                    self.done.set()
-                if self._valid:   # writes only on a change: each one costs the simulator
-                    self.tvalid.value = self._valid = 0
-                return
-            data, last, *op = beat
-            if op and op[0] is not None:
-                assert self.op is not None, "operands given but no op port"
-                self.op.value = op[0]
-            self.tvalid.value = self._valid = 1
-            self.tdata.value = data
-            self.tlast.value = int(last)
-            self._state = "presenting"
+        if self._state != "gap":
+            return
+        if self._gap:
+            self._gap -= 1
+        elif (beat := next(self._todo, None)) is not None:
+            self._present(*beat)
+            return
+        else:
+            self._state = "done"
+            self.done.set()
+        if self._valid:   # writes only on a change: each one costs the simulator
+            self.tvalid.value = self._valid = 0
+
+    def _present(self, data: int, last: bool, op: int | None = None) -> None:
+        if op is not None:
+            assert self.op is not None, "operands given but no op port"
+            self.op.value = op
+        self.tvalid.value = self._valid = 1
+        self.tdata.value = data
+        self.tlast.value = int(last)
+        self._state = "presenting"
 
     def settled(self, cycle: Callable[[], int]) -> str:
         """At ReadOnly: record a beat; say whether the port needs the next clock (AWAKE), a
