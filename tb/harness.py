@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import os
@@ -16,6 +17,7 @@ from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, RisingEdge
 
 from gpf.config import Config, load_config
+from gpf.model.formats import Datapath, datapath
 
 CLOCK_NS = 10
 
@@ -29,6 +31,11 @@ class Bench:
     seed: int
     long: bool
     short: bool = False   # TEST_LEVEL=short: mutant runs, a fifth of the default beats
+
+    @functools.cached_property
+    def dp(self) -> Datapath:
+        """datapath(cfg), built once: it builds the primitives' tables, milliseconds a call."""
+        return datapath(self.cfg)
 
     def rng(self, salt: str) -> random.Random:
         """An independent, replayable random stream for one purpose (stalls, stimulus, ...)."""
@@ -52,7 +59,7 @@ async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = Fa
 
     With hold_reset the reset is still high on return (the caller releases it and counts).
     """
-    cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns").start())
+    cocotb.start_soon(Clock(dut.clk, CLOCK_NS, unit="ns", impl="gpi").start())
     await reset(dut, reset_cycles, hold_reset)
 
 

@@ -23,19 +23,26 @@ class Field:
 def unpack(words: list[int], fields: list[Field], lanes: int) -> dict[str, np.ndarray]:
     """Split stream words into raw field values: (beats, lanes) int64 per field.
 
-    Fields are packed LSB first within a lane; lanes are concatenated, lane 0 lowest.
+    Fields are packed LSB first within a lane; lanes are concatenated, lane 0 lowest. Vectorised
+    (the words as a bit matrix): the scoreboard must not set the pace of long runs.
     """
     lane_w = sum(f.fmt.width for f in fields)
+    nbytes = max(1, (lane_w * lanes + 7) // 8)
+    raw = np.frombuffer(b"".join(w.to_bytes(nbytes, "little") for w in words),
+                        dtype=np.uint8).reshape(len(words), nbytes)
+    bits = np.unpackbits(raw, axis=1, bitorder="little")
     out = {f.name: np.zeros((len(words), lanes), dtype=np.int64) for f in fields}
-    for beat, word in enumerate(words):
-        for lane in range(lanes):
-            chunk = word >> (lane * lane_w)
-            for f in fields:
-                raw = chunk & ((1 << f.fmt.width) - 1)
-                if f.fmt.signed and raw >> (f.fmt.width - 1):
-                    raw -= 1 << f.fmt.width
-                out[f.name][beat, lane] = raw
-                chunk >>= f.fmt.width
+    for lane in range(lanes):
+        offset = lane * lane_w
+        for f in fields:
+            width = f.fmt.width
+            assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
+            weights = np.left_shift(np.int64(1), np.arange(width, dtype=np.int64))
+            value = bits[:, offset:offset + width].astype(np.int64) @ weights
+            if f.fmt.signed:
+                value = np.where(value >> (width - 1) != 0, value - (1 << width), value)
+            out[f.name][:, lane] = value
+            offset += width
     return out
 
 

@@ -8,11 +8,16 @@ from __future__ import annotations
 
 import logging
 import random
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cocotb
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import Event, ReadOnly, RisingEdge
+from cocotb.simtime import get_sim_time
+from cocotb.triggers import Event, ReadOnly, RisingEdge, Trigger, ValueChange
+from cocotb.utils import get_sim_steps
+
+from gpf.tb.harness import CLOCK_NS
 
 
 @dataclass
@@ -108,54 +113,170 @@ class StreamDriver:
         self.tvalid.value = 0
 
 
-class StreamSinks:
-    """Several AXI4-Stream outputs read by ONE coroutine per clock: each clock it draws every
-    `tready` (low with probability `stall`), then samples after the edge settles and records the
-    beats that crossed (tvalid && tready) in `beats[name]`. One coroutine instead of a monitor and
-    a ready driver per stream: cocotb's per-clock wake-ups set the pace of long runs.
-    `arrived(name, count)` waits (in simulated time, without polling) until `count` beats of
-    `name` have crossed."""
+# ---- one coroutine for every port of a testbench ---------------------------------------------
+#
+# The classes above run a coroutine each and wake on every clock. StreamLoop does their jobs
+# for several ports in one coroutine (one RisingEdge and one ReadOnly per clock instead of
+# about seven wake-ups), and sleeps through clocks on which no beat can cross: a beat needs
+# tvalid && tready at ReadOnly, so while one of them is low and only the block can raise it,
+# a value change of that signal is what to wait for. Cycle numbers come from the simulation
+# time, so a beat's cycle is exact whether or not the clocks before it were watched.
 
-    def __init__(self, clk: SimHandleBase, prefix: SimHandleBase, names: list[str],
-                 has_last: dict[str, bool], stall: float, rng: random.Random):
-        self.clk, self.stall, self.rng = clk, stall, rng
-        self.ports = [(name, getattr(prefix, f"{name}_tvalid"), getattr(prefix, f"{name}_tready"),
-                       getattr(prefix, f"{name}_tdata"),
-                       getattr(prefix, f"{name}_tlast") if has_last.get(name) else None)
-                      for name in names]
-        self.beats: dict[str, list[Beat]] = {name: [] for name in names}
-        self.cycles = 0
-        self._events = {name: Event() for name in names}
-        self._ready = [1] * len(names)
-        for _, _, tready, _, _ in self.ports:
-            tready.value = 1
-        self._task = cocotb.start_soon(self._run())
+
+AWAKE, WATCH, IDLE = "awake", "watch", "idle"   # what a port needs from StreamLoop
+
+
+class Source:
+    """Drives a slave port of the block like StreamDriver: before each beat a random idle
+    clock with probability `idle` (repeated), then the beat held until taken."""
+
+    def __init__(self, prefix: SimHandleBase, name: str, idle: float, rng: random.Random,
+                 beats: list[tuple[int, bool]] | list[tuple[int, bool, int | None]],
+                 op: SimHandleBase | None = None, has_last: bool = True):
+        self.tvalid = getattr(prefix, f"{name}_tvalid")
+        self.tready = getattr(prefix, f"{name}_tready")
+        self.tdata = getattr(prefix, f"{name}_tdata")
+        self.tlast = getattr(prefix, f"{name}_tlast") if has_last else None
+        self.idle, self.rng, self.op = idle, rng, op
+        self.beats: list[Beat] = []   # what crossed the bus
+        self.done = Event()           # set once every beat was taken
+        self._todo = iter(beats)
+        self._gap = 0                 # idle clocks before the next beat is presented
+        self._state = "next"          # next (draw a gap) | gap | presenting | done
+        self.tvalid.value = self._valid = 0
+        self.watch = self.tready   # what the block drives and a sleeping loop waits on
+
+    def drive(self) -> None:
+        """After a clock edge: move on if the beat was taken, present the next one."""
+        if self._state == "next":
+            self._gap = 0
+            while self.rng.random() < self.idle:
+                self._gap += 1
+            self._state = "gap"
+        if self._state != "gap":
+            return
+        if self._gap:
+            self._gap -= 1
+        elif (beat := next(self._todo, None)) is not None:
+            self._present(*beat)
+            return
+        else:
+            self._state = "done"
+            self.done.set()
+        if self._valid:   # writes only on a change: each one costs the simulator
+            self.tvalid.value = self._valid = 0
+
+    def _present(self, data: int, last: bool, op: int | None = None) -> None:
+        if op is not None:
+            assert self.op is not None, "operands given but no op port"
+            self.op.value = op
+        self.tvalid.value = self._valid = 1
+        self.tdata.value = data
+        if self.tlast is not None:
+            self.tlast.value = int(last)
+        self._state = "presenting"
+
+    def settled(self, cycle: Callable[[], int]) -> str:
+        """At ReadOnly: record a beat; say whether the port needs the next clock (AWAKE), a
+        change of its `watch` signal (WATCH) or nothing more (IDLE)."""
+        if self._state == "presenting":
+            if self.tready.value != 1:
+                return WATCH    # the beat is held until the block raises tready
+            if self.tvalid.value == 1:
+                self.beats.append(Beat(self.tdata.value.to_unsigned(), cycle(), _last(self)))
+                self._state = "next"
+        return IDLE if self._state == "done" else AWAKE
+
+
+class Sink:
+    """Takes beats from a master port of the block like ReadyDriver + StreamMonitor: `tready`
+    low with probability `stall` on every clock on which tvalid is high."""
+
+    def __init__(self, prefix: SimHandleBase, name: str, stall: float, rng: random.Random,
+                 has_last: bool = True):
+        self.tvalid = getattr(prefix, f"{name}_tvalid")
+        self.tready = getattr(prefix, f"{name}_tready")
+        self.tdata = getattr(prefix, f"{name}_tdata")
+        self.tlast = getattr(prefix, f"{name}_tlast") if has_last else None
+        self.stall, self.rng = stall, rng
+        self.beats: list[Beat] = []
+        self._ready = 0 if stall >= 1 else 1
+        self.tready.value = self._ready
+        self._want, self._got = 0, Event()
+        self.watch = self.tvalid
+
+    def drive(self) -> None:
+        ready = 0 if self.rng.random() < self.stall else 1
+        if ready != self._ready:
+            self.tready.value = self._ready = ready
+
+    def settled(self, cycle: Callable[[], int]) -> str:
+        if self.tvalid.value == 1:
+            if self.tready.value == 1:
+                # to_unsigned() raises on X or Z: an undefined output is an error, not a 0
+                self.beats.append(Beat(self.tdata.value.to_unsigned(), cycle(), _last(self)))
+                if len(self.beats) >= self._want:
+                    self._got.set()
+            return AWAKE       # a new random tready every clock while a beat is offered
+        # sleep only with tready high: a block may need it to move even with tvalid low
+        return WATCH if self._ready or self.stall >= 1 else AWAKE
+
+    def wait(self, n: int) -> Trigger:
+        """Fires once n beats have been taken."""
+        self._want, self._got = n, Event()
+        if len(self.beats) >= n:
+            self._got.set()
+        return self._got.wait()
+
+
+def _last(port: Source | Sink) -> bool:
+    return port.tlast is not None and port.tlast.value == 1
+
+
+class StreamLoop:
+    """Runs Sources and Sinks on one clock in one coroutine (see above) until stop()."""
+
+    def __init__(self, clk: SimHandleBase, ports: list[Source | Sink],
+                 period_ns: float = CLOCK_NS):
+        self.clk, self.ports = clk, ports
+        self.period = get_sim_steps(period_ns, "ns")
+        self._wake = Event()
+        self._asleep = [False] * len(ports)   # per port: waiting for its `watch` to change
+        self._tasks = [cocotb.start_soon(self._run())]
+        # one watcher per port rather than First(): First starts tasks on every call
+        self._tasks += [cocotb.start_soon(self._watch(k)) for k in range(len(ports))]
+
+    async def _watch(self, k: int) -> None:
+        change = ValueChange(self.ports[k].watch)
+        while True:
+            await change
+            if self._asleep[k]:
+                self._wake.set()
 
     async def _run(self) -> None:
         edge, settle = RisingEdge(self.clk), ReadOnly()
-        while True:
-            await edge
-            if self.stall:
-                for i, (_, _, tready, _, _) in enumerate(self.ports):
-                    ready = 0 if self.rng.random() < self.stall else 1
-                    if ready != self._ready[i]:
-                        tready.value = ready
-                        self._ready[i] = ready
-            await settle
-            self.cycles += 1
-            for i, (name, tvalid, _, tdata, tlast) in enumerate(self.ports):
-                if self._ready[i] and tvalid.value == 1:
-                    last = bool(tlast.value) if tlast is not None else False
-                    # to_unsigned() raises on X or Z: an undefined output is an error, not a 0
-                    self.beats[name].append(Beat(tdata.value.to_unsigned(), self.cycles, last))
-                    self._events[name].set()
+        await edge
+        start = get_sim_time("step") - self.period   # the first clock is cycle 1
 
-    async def arrived(self, name: str, count: int) -> None:
-        while len(self.beats[name]) < count:
-            self._events[name].clear()
-            await self._events[name].wait()
+        def cycle() -> int:
+            return (get_sim_time("step") - start) // self.period
+
+        while True:
+            for port in self.ports:
+                port.drive()
+            await settle
+            states = [port.settled(cycle) for port in self.ports]
+            if AWAKE in states:
+                await edge
+            else:   # no beat can cross until a watched signal changes
+                self._asleep = [state == WATCH for state in states]
+                self._wake.clear()
+                await self._wake.wait()
+                self._asleep = [False] * len(self.ports)
 
     def stop(self) -> None:
-        self._task.cancel()
-        for _, _, tready, _, _ in self.ports:
-            tready.value = 1
+        for task in self._tasks:
+            task.cancel()
+        for port in self.ports:
+            if isinstance(port, Sink):
+                port.tready.value = 1

@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles, RisingEdge
+from cocotb.triggers import ClockCycles, Combine, First, Timer
 
-from gpf.tb.harness import Bench, start
+from gpf.tb.harness import CLOCK_NS, Bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
-from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor
+from gpf.tb.stream import Sink, Source, StreamLoop
 
 # raw input fields (beats, lanes) -> raw output fields (output beats, lanes). `seen` also holds
 # STEP, each input beat's step number (beats,), and every operand field per input beat (beats,).
@@ -78,28 +78,23 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
                      inputs: dict[str, np.ndarray], lasts: list[bool], stall_in: float,
                      stall_out: float, tag: str, expect_mismatch: bool = False,
                      ops: dict[str, np.ndarray] | None = None
-                     ) -> tuple[Scoreboard, StreamMonitor, StreamMonitor]:
+                     ) -> tuple[Scoreboard, Source, Sink]:
     """Send every beat (and each step's operands, (steps,) per operand field), collect as many
     outputs as due (failing, not hanging, if they stop), score."""
-    mon_in = StreamMonitor(dut.clk, dut, "s_axis", has_last=True)
-    mon_out = StreamMonitor(dut.clk, dut, "m_axis", has_last=True)
-    ready = ReadyDriver(dut.clk, dut.m_axis_tready, stall_out, b.rng(f"{tag}-ready"))
-    driver = StreamDriver(dut.clk, dut, "s_axis", stall_in, b.rng(f"{tag}-valid"),
-                          op=dut.op if block.fields_op else None)
     n = sum(lasts) if block.reduces else len(lasts)
-    await RisingEdge(dut.clk)  # the monitors sample from the next clock on: start there
-    await driver.send(list(zip(pack(block.fields_in, inputs), lasts,
-                               _op_words(block, ops, lasts), strict=True)))
-    limit, clocks = 50 * n * block.interval + 100 + 10 * block.latency, 0
-    while len(mon_out.beats) < n:
-        await RisingEdge(dut.clk)
-        clocks += 1
-        assert clocks < limit, f"{block.name}: {len(mon_out.beats)} of {n} beats came out"
-    for _ in range(2 * block.latency + 2):   # nothing more may come out
-        await RisingEdge(dut.clk)
-    ready.stop()
-    mon_in.stop()
-    mon_out.stop()
+    beats = list(zip(pack(block.fields_in, inputs), lasts, _op_words(block, ops, lasts),
+                     strict=True))
+    mon_in = Source(dut, "s_axis", stall_in, b.rng(f"{tag}-valid"), beats,
+                    op=dut.op if block.fields_op else None)
+    mon_out = Sink(dut, "m_axis", stall_out, b.rng(f"{tag}-ready"))
+    loop = StreamLoop(dut.clk, [mon_in, mon_out])
+    limit = 50 * (len(lasts) + n) * block.interval + 100 + 10 * block.latency
+    timeout = Timer(limit * CLOCK_NS, "ns")
+    if await First(Combine(mon_in.done.wait(), mon_out.wait(n)), timeout) is timeout:
+        raise AssertionError(f"{block.name}: {len(mon_in.beats)} of {len(lasts)} beats went "
+                             f"in, {len(mon_out.beats)} of {n} came out")
+    await ClockCycles(dut.clk, 2 * block.latency + 2)   # nothing more may come out
+    loop.stop()
     assert len(mon_out.beats) == n, f"{block.name}: {len(mon_out.beats)} beats out for {n} in"
     seen = unpack([beat.data for beat in mon_in.beats], block.fields_in, block.lanes)
     lasts_in = [beat.last for beat in mon_in.beats]

@@ -11,9 +11,9 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 
 from gpf.model import blocks
-from gpf.model.blocks import Flag, cholesky
+from gpf.model.blocks import Flag, cholesky, cov_pairs
 from gpf.model.fixed import Format
-from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS, datapath
+from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS
 from gpf.rtl.generate import cholesky_context, cholesky_pairs
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
@@ -29,12 +29,17 @@ from gpf.tb.streaming import (
 FLAGS = Format.parse("u3.0")
 
 
+def pairs_of(b: Bench) -> list[tuple[int, int]]:
+    """cholesky_pairs(b.cfg) without building the datapath again (stimulus asks per matrix)."""
+    return cov_pairs(b.dp, b.cfg.app_params.get("covariance", "full"))
+
+
 def lower(n: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(n) for j in range(i + 1)]
 
 
 def cholesky_model(b: Bench):
-    dp, pairs = datapath(b.cfg), cholesky_pairs(b.cfg)
+    dp, pairs = b.dp, pairs_of(b)
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         beats = len(seen[f"s{pairs[0][0]}{pairs[0][1]}"])
@@ -52,8 +57,9 @@ def cholesky_model(b: Bench):
 
 
 def block(b: Bench, model=None) -> StreamBlock:
-    dp, pairs = datapath(b.cfg), cholesky_pairs(b.cfg)
+    dp, pairs = b.dp, pairs_of(b)
     k = cholesky_context(b.cfg)
+    assert pairs == cholesky_pairs(b.cfg)
     assert b.manifest["modules"]["cholesky"]["latency"] == k["latency"]
     fields_in = [Field(f"s{i}{j}", dp.sigma(i, j)) for i, j in pairs]
     fields_out = [Field(f"l{i}{j}", dp.chol[i]) for i, j in lower(dp.n)] + [Field("flags", FLAGS)]
@@ -66,9 +72,9 @@ def block(b: Bench, model=None) -> StreamBlock:
 # ---- stimulus: Sigma from a real L, quantised to Sigma's formats ------------------------------
 def to_raw(b: Bench, sigma: np.ndarray) -> dict[tuple[int, int], int]:
     """Real Sigma (n, n) -> raw entries of the pairs, rounded and clipped to their formats."""
-    dp = datapath(b.cfg)
+    dp = b.dp
     out = {}
-    for i, j in cholesky_pairs(b.cfg):
+    for i, j in pairs_of(b):
         fmt = dp.sigma(i, j)
         raw = math.floor(float(sigma[i, j]) * 2.0 ** fmt.frac_bits + 0.5) if math.isfinite(
             sigma[i, j]) else fmt.max_raw
@@ -79,7 +85,7 @@ def to_raw(b: Bench, sigma: np.ndarray) -> dict[tuple[int, int], int]:
 def scales(b: Bench, rng: np.random.Generator, kind: str) -> np.ndarray:
     """Per-component standard deviations: around the config's sigma0 (times 10^-1 .. 10^2), or
     log-uniform from 2^5 LSB of L (below that most pivots floor) to the format's top."""
-    dp = datapath(b.cfg)
+    dp = b.dp
     if kind == "realistic":
         sd0 = np.sqrt(np.asarray(b.cfg.app_params["sigma0_diag"], dtype=float))
         return sd0 * 10.0 ** rng.uniform(-1, 2, dp.n)
@@ -98,7 +104,7 @@ def random_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], in
     """One matrix from a mixture: SPD (realistic or any scale, weak to strong correlations),
     rank-deficient, not positive definite (a diagonal entry lowered or negative), the zero
     matrix, a huge diagonal (L saturates), tiny diagonals near the floor."""
-    n = datapath(b.cfg).n
+    n = b.dp.n
     kind = rng.choice(["realistic", "wide", "singular", "notpd", "zero", "huge", "tiny"],
                       p=[0.35, 0.25, 0.12, 0.1, 0.02, 0.08, 0.08])
     corr = float(rng.choice([0.0, 0.3, 1.0, 5.0]))
@@ -125,7 +131,7 @@ def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]
     CHOL_FLOOR_LSB^2, or (half the time) a pair a, a+1 with L_aa = x, L_(a+1)a = y exactly
     (Sigma_aa = x^2, Sigma_(a+1)a = x y, |x|, |y| < 2^15 so the rounded 1/x gives y back) and
     Sigma_(a+1)(a+1) = y^2 + (y^2 >> REL) + delta: a pivot at the relative floor."""
-    dp, pairs = datapath(b.cfg), cholesky_pairs(b.cfg)
+    dp, pairs = b.dp, pairs_of(b)
     fl = CHOL_FLOOR_LSB**2
     raw = {p: 0 for p in pairs}
     for j in range(dp.n):
@@ -143,7 +149,7 @@ def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]
 
 def stack(b: Bench, mats: list[dict[tuple[int, int], int]]) -> dict[str, np.ndarray]:
     return {f"s{i}{j}": np.array([[m[(i, j)]] for m in mats], dtype=np.int64)
-            for i, j in cholesky_pairs(b.cfg)}
+            for i, j in pairs_of(b)}
 
 
 def random_inputs(b: Bench) -> Inputs:
@@ -158,7 +164,7 @@ def corner_sigmas(b: Bench) -> list[dict[tuple[int, int], int]]:
     """Zero, identity-like, the maximum diagonal (every L_jj saturates), the most negative
     entries, full-range off-diagonals (L_ij saturates), exact floor values, a negative pivot,
     rank one, and random matrices of every kind."""
-    dp, pairs = datapath(b.cfg), cholesky_pairs(b.cfg)
+    dp, pairs = b.dp, pairs_of(b)
     fl = CHOL_FLOOR_LSB**2
     rng = np.random.default_rng(b.rng("cholesky-corners").getrandbits(32))
 

@@ -30,7 +30,7 @@ from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_na
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
-from gpf.tb.stream import ReadyDriver, StreamDriver, StreamMonitor, StreamSinks
+from gpf.tb.stream import ReadyDriver, Sink, Source, StreamDriver, StreamLoop, StreamMonitor
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
 OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
@@ -258,19 +258,23 @@ class FilterBench:
         sigma = self.sigma0(sigma0)
         await self.send("s_init", [one_beat(s.init, self.init_values(mu0, sigma0))], stall)
 
-        taps = StreamSinks(d.clk, d, ["m_cond", "m_part", "m_est"],
-                           {"m_cond": True, "m_part": True}, stall, self.b.rng("ready"))
-        mons = {k: taps.beats[f"m_{k}"] for k in ("cond", "part", "est")}
         raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
-        feeder = cocotb.start_soon(self.send("s_step", step_words, stall))
+        rng = self.b.rng("streams")
+        sinks = {k: Sink(d, f"m_{k}", stall, rng, has_last=(k != "est"))
+                 for k in ("cond", "part", "est")}
+        steps_in = Source(d, "s_step", stall, rng, [(w, False) for w in step_words],
+                          has_last=False)
+        # one coroutine drives the step inputs and reads every output
+        loop = StreamLoop(d.clk, [steps_in, *sinks.values()])
+        mons = {k: sink.beats for k, sink in sinks.items()}
         beats = gpf.particles // lanes
         sticky, rtl_mu = 0, [gpf.to_real_mu(mu)]
         limit = 200 * (beats + 1000) * (1 + int(10 * stall))
         for k in range(1, steps + 1):
             res = gpf.step(mu, chol, sigma, raw_inputs[k - 1], draws[k - 1], keep_particles=True)
             try:
-                await with_timeout(taps.arrived("m_est", k), limit * CLOCK_NS, "ns")
+                await with_timeout(sinks["est"].wait(k), limit * CLOCK_NS, "ns")
             except SimTimeoutError:
                 raise AssertionError(f"step {k}: no result after {limit} clocks") from None
             exp_cond, exp_part = expected_taps(res, lanes)
@@ -295,10 +299,10 @@ class FilterBench:
             res_out.particles_checked += gpf.particles
             if spec.progress:
                 Path(spec.progress).write_text(f"{k} {self.mismatches}\n")
-        await feeder
+        await steps_in.done.wait()
         for _ in range(50):   # nothing more may come out
             await RisingEdge(d.clk)
-        taps.stop()
+        loop.stop()
         assert len(mons["est"]) == steps, "extra result beats"
         assert len(mons["cond"]) == len(mons["part"]) == steps * beats, \
             "extra tap beats"
