@@ -210,11 +210,13 @@ def cmd_model_wordlength(args: argparse.Namespace) -> int:
     lo, _, rest = args.words.partition(":")
     hi, _, step = rest.partition(":")
     try:
-        words = list(range(int(lo), int(hi) + 1, int(step or 2)))
+        first, last, stride = int(lo), int(hi), int(step or 2)
     except ValueError:
         raise UsageError(f"--words {args.words!r}: expected FIRST:LAST[:STEP]") from None
-    if not words or words[0] < 12 or words[-1] > WORD_BITS[1]:
-        raise UsageError(f"--words {args.words!r}: widths must lie in [12, {WORD_BITS[1]}]")
+    if not 12 <= first <= last <= WORD_BITS[1] or stride < 1:
+        raise UsageError(f"--words {args.words!r}: widths must lie in [12, {WORD_BITS[1]}], "
+                         "FIRST <= LAST, STEP >= 1")
+    words = list(range(first, last + 1, stride))
     for name in ("runs", "steps", "particles"):
         _positive(f"--{name}", getattr(args, name))
     _range("--steps", args.steps, 1, STEPS_MAX)
@@ -468,6 +470,9 @@ def _one_line(text: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     try:
+        for arg in sys.argv[1:] if argv is None else argv:
+            if "\0" in arg:   # no path can hold it (only a caller from Python can pass it)
+                raise UsageError(f"argument {arg!r}: contains a NUL byte")
         args = build_parser().parse_args(argv)
         return args.func(args)
     except (UsageError, ConfigError, ToolchainError) as exc:

@@ -166,7 +166,7 @@ def _show(value: Any) -> str:
 
 def _name(text: str) -> str:
     """A section, key or path as the user wrote it, quoted when it would break the line."""
-    return text if text.isprintable() and len(text) <= 60 else _show(text)
+    return text if text.isprintable() else repr(text)
 
 
 def _check_key(where: str, key: Key, value: Any) -> Any:
@@ -286,6 +286,8 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
         data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{where}: cannot read config: {exc.strerror}") from None
+    except ValueError:   # a NUL byte in the path (from Python; a shell cannot pass one)
+        raise ConfigError(f"{where}: cannot read config: not a valid path") from None
     try:
         text = data.decode()
     except UnicodeDecodeError as exc:
