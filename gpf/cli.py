@@ -12,11 +12,16 @@ import tomllib
 from pathlib import Path
 from typing import Any, NoReturn
 
-from gpf.config import ConfigError, load_config
-from gpf.toolchain import ToolchainError
+from gpf.config import APP_FORMATS, WORD_BITS, ConfigError, load_config
+from gpf.toolchain import ToolchainError, check_simulator, check_writable
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+BUILD = Path("build")
+SEED_MAX = (1 << 32) - 1        # cocotb's and the scenarios' seeds (runs print 32-bit ones)
+STEPS_MAX = 100_000             # as filter.steps
+PARTICLES_MAX = 1 << 16         # as filter.particles
+SAMPLES_MAX = 100_000_000
 
 
 class UsageError(Exception):
@@ -54,11 +59,72 @@ def _config(args: argparse.Namespace):
     return load_config(config_path(args.config), parse_overrides(args.set))
 
 
-def cmd_generate(args: argparse.Namespace) -> int:
-    from gpf.rtl.generate import generate
-
+def _rtl_config(args: argparse.Namespace):
+    """The config, checked to generate (a valid config's derived datapath may not fit)."""
     cfg = _config(args)
-    out = generate(cfg, Path(args.out) if args.out else None)
+    _check_generates(cfg)
+    return cfg
+
+
+def _check_generates(cfg) -> None:
+    from gpf.rtl.generate import MODULES, modules_for
+
+    try:
+        for name in modules_for(cfg):
+            MODULES[name].context(cfg)
+    except (ValueError, ArithmeticError) as exc:
+        raise ConfigError(f"{cfg.source or cfg.name}: the RTL of this config cannot be "
+                          f"generated: {exc}") from None
+
+
+def _range(name: str, value: int | None, lo: int, hi: int) -> None:
+    if value is not None and not lo <= value <= hi:
+        raise UsageError(f"{name} {value}: must be an integer in [{lo}, {hi}]")
+
+
+def _check_word(word: int | None, cfg) -> None:
+    """--word resizes the state and weight formats keeping their integer bits."""
+    for name in (*APP_FORMATS[cfg.app], "weight"):
+        fmt = cfg.formats[name]
+        if word is not None and word < fmt.width - fmt.frac_bits:
+            raise UsageError(f"--word {word}: narrower than the integer part of formats.{name} "
+                             f"= '{fmt}' (needs at least {fmt.width - fmt.frac_bits} bits)")
+
+
+def _out_file(name: str, path: str) -> Path:
+    """An output file the command writes at its end: checked before any work starts."""
+    out = Path(path)
+    if out.is_dir():
+        raise UsageError(f"{name} {path}: is a folder; give a file name in it")
+    check_writable(out.parent, f"choose another {name} or fix the folder's permissions")
+    return out
+
+
+def _out_dir(name: str, path: str | None) -> None:
+    if path is not None:
+        if Path(path).exists() and not Path(path).is_dir():
+            raise UsageError(f"{name} {path}: is a file; give a folder")
+        check_writable(Path(path), f"choose another {name} or fix the folder's permissions")
+
+
+def _build_dir(cfg) -> Path:
+    folder = BUILD / cfg.name
+    check_writable(folder, "run gpf from the project folder as a user who can write build/, "
+                   "or fix its permissions")
+    return folder
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from gpf.rtl.generate import default_out_dir, generate
+
+    cfg = _rtl_config(args)
+    out_dir = Path(args.out) if args.out else default_out_dir(cfg)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UsageError(f"--out {out_dir}: is a file; give a folder")
+    check_writable(out_dir, "choose another --out or fix the folder's permissions"
+                   if args.out else "run gpf from a folder where it can write build/, or "
+                   "give --out")
+    out = generate(cfg, out_dir)
     for files in out.files.values():
         for path in files:
             print(path)
@@ -73,9 +139,11 @@ def cmd_model_grng(args: argparse.Namespace) -> int:
 
     if args.samples < 1:
         raise UsageError(f"--samples {args.samples}: must be at least 1")
+    _range("--samples", args.samples, 1, SAMPLES_MAX)
+    _range("--seed", args.seed, 0, (1 << 64) - 1)   # a seed load: 64 bits, as grng.seed
+    out = _out_file("--out", args.out)
     cfg = _config(args)
     samples = GrngModel(cfg).normals(args.samples, seed=args.seed)
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.save(out, samples)
     print(f"{out}: {samples.shape[0]} x {samples.shape[1]} samples of {cfg.noise} "
@@ -107,10 +175,17 @@ def cmd_model_run(args: argparse.Namespace) -> int:
 
     for name in ("steps", "particles", "runs"):
         _positive(f"--{name}", getattr(args, name))
+    _range("--steps", args.steps, 1, STEPS_MAX)
+    _range("--particles", args.particles, 2, PARTICLES_MAX)
+    _range("--seed", args.seed, 0, SEED_MAX)
+    _range("--word", args.word, *WORD_BITS)
+    out = _out_file("--json", args.json)
+    _out_dir("--plot", args.plot)
     cfg = _config(args)
     if args.particles is not None and args.particles % cfg.lanes:
         raise UsageError(f"--particles {args.particles}: must be a multiple of "
                          f"filter.lanes = {cfg.lanes}")
+    _check_word(args.word, cfg)
     try:
         mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
                          seed=args.seed, word=args.word, scenario=_scenario_arg(args.scenario))
@@ -119,7 +194,6 @@ def cmd_model_run(args: argparse.Namespace) -> int:
     summary = mc.summary()
     if args.plot:
         summary["plots"] = plot(mc, args.plot)
-    out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(summary, indent=1) + "\n")
     ratio, noise = mc.ratio_and_noise()
@@ -136,15 +210,28 @@ def cmd_model_wordlength(args: argparse.Namespace) -> int:
     lo, _, rest = args.words.partition(":")
     hi, _, step = rest.partition(":")
     try:
-        words = list(range(int(lo), int(hi) + 1, int(step or 2)))
+        first, last, stride = int(lo), int(hi), int(step or 2)
     except ValueError:
         raise UsageError(f"--words {args.words!r}: expected FIRST:LAST[:STEP]") from None
-    if not words or words[0] < 12 or words[-1] > 32:
-        raise UsageError(f"--words {args.words!r}: widths must lie in [12, 32]")
+    if not 12 <= first <= last <= WORD_BITS[1] or stride < 1:
+        raise UsageError(f"--words {args.words!r}: widths must lie in [12, {WORD_BITS[1]}], "
+                         "FIRST <= LAST, STEP >= 1")
+    words = list(range(first, last + 1, stride))
+    for name in ("runs", "steps", "particles"):
+        _positive(f"--{name}", getattr(args, name))
+    _range("--steps", args.steps, 1, STEPS_MAX)
+    _range("--particles", args.particles, 2, PARTICLES_MAX)
+    _range("--seed", args.seed, 0, SEED_MAX)
+    cfgs = [load_config(config_path(name), parse_overrides(args.set))
+            for name in args.config or ["bot", "uav"]]
+    for cfg in cfgs:
+        if args.particles % cfg.lanes:
+            raise UsageError(f"--particles {args.particles}: must be a multiple of "
+                             f"filter.lanes = {cfg.lanes} ({cfg.name})")
+        _check_word(words[0], cfg)
     print("| config | word | RMSE float | RMSE fixed | fixed/float | +- (1 s.e.) | flags |")
     print("|---|---|---|---|---|---|---|")
-    for name in args.config or ["bot", "uav"]:
-        cfg = load_config(config_path(name), parse_overrides(args.set))
+    for cfg in cfgs:
         for word in words:
             mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
                              seed=args.seed, word=word)
@@ -171,13 +258,16 @@ def _module(name: str, cfg) -> str:
 def cmd_sim(args: argparse.Namespace) -> int:
     from gpf.sim import run_sim
 
-    cfg = _config(args)
+    _range("--seed", args.seed, 0, SEED_MAX)
+    cfg = _rtl_config(args)
     note = ""
     module = args.module
     if module is None:
         module = f"gpf_{cfg.app}"
         note = " (the whole filter's testbench; `gpf run` for a long run with a summary)"
     module = _module(module, cfg)
+    check_simulator(args.sim, args.waves)
+    _build_dir(cfg)
     print(f"gpf sim: {module} on {args.sim}, config {cfg.name}{note}", flush=True)
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                      testcase=args.testcase)
@@ -200,7 +290,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     for name in ("steps", "particles"):
         _positive(f"--{name}", getattr(args, name))
-    cfg = _config(args)
+    _range("--steps", args.steps, 1, STEPS_MAX)
+    _range("--seed", args.seed, 0, SEED_MAX)
+    out = _out_file("--json", args.json)
+    _out_dir("--plot", args.plot)
+    cfg = _rtl_config(args)
     particles = args.particles or cfg.particles
     if particles > cfg.particles or particles % cfg.lanes:
         raise UsageError(f"--particles {particles}: must be a multiple of filter.lanes = "
@@ -222,10 +316,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         steps = sc.steps if args.steps is None else args.steps
         if steps != sc.steps:
             raise UsageError(f"--steps {steps}: the scenario file has {sc.steps} steps")
+    # here, not in the simulation's thread: a missing tool is one line, not a traceback
+    check_simulator(args.sim, args.waves)
+    _build_dir(cfg)
     res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves))
     if args.plot:
         res["plots"] = plot(res, Path(args.plot))
-    out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=1) + "\n")
     for line in summary_lines(res):
@@ -241,6 +337,20 @@ def cmd_lint(args: argparse.Namespace) -> int:
     from gpf.rtl.lint import lint_configs
 
     paths = [config_path(c) for c in args.config] or sorted(Path("configs").glob("*.toml"))
+    if not paths:
+        raise UsageError("lint: no configs: give --config or run gpf in the project folder "
+                         "(configs/*.toml)")
+    # every config at every lane count, before the first lint starts
+    for path in paths:
+        for lanes in args.lanes or [1, 2, 4]:
+            cfg = load_config(path, {"filter.lanes": lanes})
+            _check_generates(cfg)
+            _build_dir(cfg)
+    from importlib.util import find_spec
+
+    if find_spec("pyslang") is None:
+        raise ToolchainError("pyslang not installed: run `make venv` (it installs the pinned "
+                             "dev packages into .venv)")
     problems = lint_configs(paths, lanes=args.lanes)
     return EXIT_FAILED if problems else 0
 
@@ -353,12 +463,26 @@ def build_parser() -> Parser:
     return parser
 
 
+def _one_line(text: str) -> str:
+    """A message with a user's newline (in a path, a --set value) still prints as one line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
+        for arg in sys.argv[1:] if argv is None else argv:
+            if "\0" in arg:   # no path can hold it (only a caller from Python can pass it)
+                raise UsageError(f"argument {arg!r}: contains a NUL byte")
         args = build_parser().parse_args(argv)
         return args.func(args)
     except (UsageError, ConfigError, ToolchainError) as exc:
-        print(f"gpf: error: {exc}", file=sys.stderr)
+        print(f"gpf: error: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:
+        # the checks above name the folder first; this is for a folder that changed since
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"gpf: error: {_one_line(f'{where}{exc.strerror or exc}')}: check the path and "
+              "its permissions", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130

@@ -40,14 +40,22 @@ def _choice(*options: Any, default: Any = None) -> Key:
                default)
 
 
+def _finite(v: int | float) -> bool:
+    """A number a float can hold (a 400-digit TOML integer cannot)."""
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
 def _positive_float(default: float | None = None) -> Key:
-    return Key((int, float), "a number > 0", lambda v: math.isfinite(v) and v > 0, default)
+    return Key((int, float), "a number > 0", lambda v: _finite(v) and v > 0, default)
 
 
 def _vector(n: int, positive: bool = False) -> Key:
     what = f"a list of {n} {'positive ' if positive else ''}numbers"
     return Key(list, what, lambda v: len(v) == n and all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+        isinstance(x, int | float) and not isinstance(x, bool) and _finite(x)
         and (x > 0 or not positive) for x in v))
 
 
@@ -104,6 +112,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 APP_FORMATS = {"bot": ("state",), "uav": ("quaternion", "velocity")}
+# the datapath word (the state formats' width) the generator can build: below 8 bits the
+# weight's exponent has no fraction, above 30 the CORDIC's and Cholesky's sums pass 63 bits
+WORD_BITS = (8, 30)
 
 
 @dataclass(frozen=True)
@@ -147,26 +158,40 @@ def _type_name(kind: type | tuple[type, ...]) -> str:
     return names[kind]
 
 
+def _show(value: Any) -> str:
+    """repr() cut to one short line: a message stays readable whatever the value."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:50] + "..." + text[-7:]
+
+
+def _name(text: str) -> str:
+    """A section, key or path as the user wrote it, quoted when it would break the line."""
+    return text if text.isprintable() else repr(text)
+
+
 def _check_key(where: str, key: Key, value: Any) -> Any:
     # bool is an int in Python; a config never means True for a number
     kinds = key.kind if isinstance(key.kind, tuple) else (key.kind,)
     if isinstance(value, bool) or not isinstance(value, kinds):
-        raise ConfigError(f"{where} = {value!r}: expected {_type_name(key.kind)}, "
+        raise ConfigError(f"{where} = {_show(value)}: expected {_type_name(key.kind)}, "
                           f"{key.allowed}")
     if not key.check(value):
-        raise ConfigError(f"{where} = {value!r}: must be {key.allowed}")
+        raise ConfigError(f"{where} = {_show(value)}: must be {key.allowed}")
     return value
 
 
 def _read_sections(doc: dict[str, Any], prefix: str) -> dict[str, dict[str, Any]]:
     values: dict[str, dict[str, Any]] = {}
     for section in doc:
+        if section not in SCHEMA and not isinstance(doc[section], dict):
+            raise ConfigError(f"{prefix}{_name(section)} = {_show(doc[section])}: a key "
+                              "outside any section; allowed sections are " + ", ".join(SCHEMA))
         if section not in SCHEMA:
-            raise ConfigError(f"{prefix}unknown section [{section}]: allowed sections are "
-                              + ", ".join(SCHEMA))
+            raise ConfigError(f"{prefix}unknown section [{_name(section)}]: allowed sections "
+                              "are " + ", ".join(SCHEMA))
         if not isinstance(doc[section], dict):
-            raise ConfigError(f"{prefix}{section} = {doc[section]!r}: expected a [{section}] "
-                              "table")
+            raise ConfigError(f"{prefix}{section} = {_show(doc[section])}: expected a "
+                              f"[{section}] table")
     app = doc.get("filter", {}).get("app")
     for section, keys in SCHEMA.items():
         table = doc.get(section)
@@ -179,8 +204,8 @@ def _read_sections(doc: dict[str, Any], prefix: str) -> dict[str, dict[str, Any]
             raise ConfigError(f"{prefix}missing section [{section}]")
         for name in table:
             if name not in keys:
-                raise ConfigError(f"{prefix}{section}.{name}: unknown key; allowed keys are "
-                                  + ", ".join(keys))
+                raise ConfigError(f"{prefix}{section}.{_name(name)}: unknown key; allowed keys "
+                                  "are " + ", ".join(keys))
         values[section] = {}
         for name, key in keys.items():
             if name in table:
@@ -209,15 +234,29 @@ def _check_formats(values: dict[str, dict[str, Any]], app: str, prefix: str) -> 
     if not (noise.signed and noise.int_bits == 3 and 4 <= noise.frac_bits <= 20):
         raise ConfigError(f"{prefix}formats.noise = {fmts['noise']!r}: must be s3.F with "
                           "F in [4, 20]")
-    if out["weight"].signed:
+    if out["weight"].signed or out["weight"].int_bits != 1:
         raise ConfigError(f"{prefix}formats.weight = {fmts['weight']!r}: must be unsigned "
-                          "(uI.F)")
+                          "with one integer bit, u1.F (weights 2^-t lie in (0, 1])")
+    first = APP_FORMATS[app][0]
+    lo, hi = WORD_BITS
+    for name in APP_FORMATS[app]:
+        width = out[name].width
+        if not out[name].signed:
+            raise ConfigError(f"{prefix}formats.{name} = {fmts[name]!r}: must be signed "
+                              "(sI.F)")
+        if not lo <= width <= hi:
+            raise ConfigError(f"{prefix}formats.{name} = {fmts[name]!r}: {width} bits; the "
+                              f"datapath word must be {lo} to {hi} bits")
+        if width != out[first].width:
+            raise ConfigError(f"{prefix}formats.{name} = {fmts[name]!r}: {width} bits; must "
+                              f"be as wide as formats.{first} = {fmts[first]!r} "
+                              f"({out[first].width} bits, one datapath word)")
     return out
 
 
 def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = "") -> Config:
     """Validate a parsed TOML document; raise ConfigError on the first problem."""
-    prefix = f"{source}: " if source else ""
+    prefix = f"{_name(source)}: " if source else ""
     values = _read_sections(doc, prefix)
     flt = values["filter"]
     if flt["particles"] % flt["lanes"]:
@@ -242,20 +281,29 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
 def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
     """Load and validate a TOML config. `overrides` maps 'section.key' to a value."""
     path = Path(path)
+    where = _name(str(path))
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from None
+        raise ConfigError(f"{where}: cannot read config: {exc.strerror}") from None
+    except ValueError:   # a NUL byte in the path (from Python; a shell cannot pass one)
+        raise ConfigError(f"{where}: cannot read config: not a valid path") from None
+    try:
+        text = data.decode()
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{where}: not a UTF-8 text file (byte 0x{data[exc.start]:02x} at "
+                          f"offset {exc.start}): a config is TOML text") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+        raise ConfigError(f"{where}: not valid TOML: {exc}") from None
     overrides = overrides or {}
     for dotted, value in overrides.items():
         section, _, key = dotted.partition(".")
         table = doc.setdefault(section, {})
         if not isinstance(table, dict):
-            raise ConfigError(f"{path}: {section} = {table!r}: expected a [{section}] table")
+            raise ConfigError(f"{where}: {_name(section)} = {_show(table)}: expected a "
+                              f"[{_name(section)}] table")
         table[key] = value
     # each override set builds in its own folder: build/bot-lanes2/...
     name = path.stem + "".join(f"-{k.rpartition('.')[2]}{v}" for k, v in overrides.items())
@@ -264,4 +312,9 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
 
 
 def _safe_name(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    if len(safe) > 100:  # a folder name: long override values would pass the 255-byte limit
+        import hashlib
+
+        safe = safe[:80] + "-" + hashlib.sha1(safe.encode()).hexdigest()[:12]
+    return safe

