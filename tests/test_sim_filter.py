@@ -162,8 +162,9 @@ def test_stall_campaign(tmp_path: Path, shard: int) -> None:
     while checked < CAMPAIGN_PARTICLES // 2:
         config, lanes = rng.choice(CONFIGS), rng.choice((1, 2, 4))
         cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
-        particles = lanes * rng.randint(1, cfg.particles // lanes)
-        steps = max(2, min(50, 200_000 // particles))
+        # big runs: a Verilator build costs as much as checking ~150,000 particles
+        particles = lanes * rng.randint(cfg.particles // lanes // 4, cfg.particles // lanes)
+        steps = min(250, 500_000 // particles)
         seed = rng.randrange(1 << 30)
         result, res = filter_run(config, "verilator", lanes, steps, particles, seed,
                                  testcase="test_filter", build_root=tmp_path / str(runs),
