@@ -159,6 +159,9 @@ def test_stall_campaign(tmp_path: Path, shard: int) -> None:
     every particle bit-exact. Two shards (pytest -n 2) of half the particle checks each."""
     rng = random.Random(f"campaign-{shard}")
     checked, runs = 0, 0
+    log = Path("build") / f"stall-campaign-{shard}.txt"
+    log.parent.mkdir(exist_ok=True)
+    log.write_text("")
     while checked < CAMPAIGN_PARTICLES // 2:
         config, lanes = rng.choice(CONFIGS), rng.choice((1, 2, 4))
         cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
@@ -172,8 +175,13 @@ def test_stall_campaign(tmp_path: Path, shard: int) -> None:
         check_run(result, res, steps, particles, lanes, tests=1)
         checked += res["particles_checked"]
         runs += 1
-        print(f"campaign shard {shard}: run {runs} {cfg.name} N={particles} x {steps} steps "
-              f"seed {seed}: {res['particles_checked']} particles, total {checked}", flush=True)
+        line = (f"campaign shard {shard}: run {runs} {cfg.name} N={particles} x {steps} steps "
+                f"seed {seed}: {res['particles_checked']} particles, total {checked}")
+        print(line, flush=True)
+        with log.open("a") as f:   # pytest -n hides prints: the count goes to a file too
+            f.write(line + "\n")
         shutil.rmtree(tmp_path / str(runs - 1), ignore_errors=True)
-    print(f"stall campaign shard {shard}: {checked} particles checked in {runs} runs, "
-          "0 mismatches")
+    line = f"stall campaign shard {shard}: {checked} particles checked in {runs} runs, 0 mismatches"
+    print(line)
+    with log.open("a") as f:
+        f.write(line + "\n")
