@@ -48,12 +48,14 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
     return result, json.loads(out.read_text()) if out.exists() else {}
 
 
-def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: int = 5) -> None:
+def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: int = 5,
+              stalled: bool = False) -> None:
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
     assert result.tests == tests   # filter, stalls, reset mid-step, bad N, corrupted model
     assert res["mismatches"] == 0 and res["particles_checked"] == steps * particles
     assert len(res["cycles_per_step"]) == steps
-    assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]
+    if not stalled:   # stalls stretch a step as long as they like
+        assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]
 
 
 @pytest.mark.parametrize("config,sim,lanes,steps,particles", [
@@ -172,7 +174,7 @@ def test_stall_campaign(tmp_path: Path, shard: int) -> None:
         result, res = filter_run(config, "verilator", lanes, steps, particles, seed,
                                  testcase="test_filter", build_root=tmp_path / str(runs),
                                  stall=0.5)
-        check_run(result, res, steps, particles, lanes, tests=1)
+        check_run(result, res, steps, particles, lanes, tests=1, stalled=True)
         checked += res["particles_checked"]
         runs += 1
         line = (f"campaign shard {shard}: run {runs} {cfg.name} N={particles} x {steps} steps "
