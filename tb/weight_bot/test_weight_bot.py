@@ -21,7 +21,7 @@ from gpf.tb.streaming import (
     check_latency_and_throughput,
     check_random_beats,
 )
-from gpf.tb.weight_bot.common import (
+from gpf.tb.weight_common import (
     SAT,
     check_weights_span,
     run_steps,
