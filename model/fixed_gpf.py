@@ -57,11 +57,14 @@ class FixedGPF:
 
     def init(self, mu0: np.ndarray, sigma0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Raw (mu, L) from real mu0 and Sigma0 (exact Cholesky of the quantised Sigma0)."""
-        dp = self.dp
-        sigma = {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** dp.cov_frac(i, j) + 0.5)
-                 for i, j in self.pairs}
-        chol, _ = blocks.cholesky(dp, sigma)
+        chol, _ = blocks.cholesky(self.dp, self.quantise_sigma(sigma0))
         return self.quantise_state(mu0), chol
+
+    def quantise_sigma(self, sigma0: np.ndarray) -> dict[tuple[int, int], int]:
+        """Raw Sigma entries (the covariance pairs) of a real matrix, rounded half up."""
+        frac = self.dp.cov_frac
+        return {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** frac(i, j) + 0.5)
+                for i, j in self.pairs}
 
     # ---- one step ----------------------------------------------------------------------------
     def propagate(self, x: np.ndarray, e: np.ndarray, inputs: dict,
@@ -151,8 +154,7 @@ def run(gpf: FixedGPF, scenario, draws: np.ndarray | None = None,
         draws = gpf.draws(steps, seed)
     mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(scenario)
     mu, chol = gpf.init(mu0, sigma0)
-    sigma = {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** gpf.dp.cov_frac(i, j) + 0.5)
-             for i, j in gpf.pairs}
+    sigma = gpf.quantise_sigma(sigma0)
     out_mu = np.empty((steps + 1, n))
     out_sigma = np.empty((steps + 1, n, n))
     flags = np.zeros(steps + 1, dtype=np.int64)

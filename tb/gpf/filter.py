@@ -30,7 +30,7 @@ from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_na
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
-from gpf.tb.stream import ReadyDriver, Sink, Source, StreamDriver, StreamLoop, StreamMonitor
+from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
 OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
@@ -210,31 +210,24 @@ class FilterBench:
         await self.send("s_seed", seed_words(self.spec.seed + 1, gpf.dp.draws() * gpf.cfg.lanes))
         _, sc = scenario_of(gpf, self.spec)
         mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
-        await self.send("s_init", [one_beat(self.s.init, self.init_values(mu0, sigma0))])
-        raw = gpf.quantise_inputs(sc.step_inputs(1))
-        feeder = cocotb.start_soon(self.send("s_step", [one_beat(self.s.step,
-                                                                 step_values(gpf, raw))]))
-        cond = StreamMonitor(d.clk, d, "m_cond", has_last=True)
-        ready = ReadyDriver(d.clk, d.m_part_tready, 0.3, self.b.rng("interrupt"))
-        half = gpf.particles // gpf.cfg.lanes // 2
-        while len(cond.beats) < half:
-            await RisingEdge(d.clk)
-        feeder.cancel()
-        ready.stop()
-        cond.stop()
-
-    def init_values(self, mu0: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
-        gpf = self.gpf
         mu, _ = gpf.init(mu0, sigma0)
-        sent = self.spec.init_particles
-        out = {"particles": gpf.particles if sent is None else sent}
-        out |= {f"mu{i}": int(v) for i, v in enumerate(mu)}
-        return out | {f"s{i}_{j}": v for (i, j), v in self.sigma0(sigma0).items()}
+        await self.send("s_init", [one_beat(self.s.init, self.init_values(mu, sigma0))])
+        raw = gpf.quantise_inputs(sc.step_inputs(1))
+        rng = self.b.rng("interrupt")
+        step_in = Source(d, "s_step", 0.0, rng, [(one_beat(self.s.step, step_values(gpf, raw)),
+                                                  False)], has_last=False)
+        cond, part = Sink(d, "m_cond", 0.0, rng), Sink(d, "m_part", 0.3, rng)
+        loop = StreamLoop(d.clk, [step_in, cond, part])
+        await cond.wait(gpf.particles // gpf.cfg.lanes // 2)
+        await RisingEdge(d.clk)   # the wait ends in ReadOnly, where nothing may be written
+        loop.stop()
 
-    def sigma0(self, sigma0: np.ndarray) -> dict[tuple[int, int], int]:
-        frac = self.gpf.dp.cov_frac
-        return {(i, j): math.floor(float(sigma0[i, j]) * 2.0 ** frac(i, j) + 0.5)
-                for i, j in self.gpf.pairs}
+    def init_values(self, mu: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
+        """The init beat: N, the raw mu0 and the raw Sigma0 (real sigma0)."""
+        sent = self.spec.init_particles
+        out = {"particles": self.gpf.particles if sent is None else sent}
+        out |= {f"mu{i}": int(v) for i, v in enumerate(mu)}
+        return out | {f"s{i}_{j}": v for (i, j), v in self.gpf.quantise_sigma(sigma0).items()}
 
     async def run(self) -> RunResult:
         d, spec, gpf, s = self.dut, self.spec, self.gpf, self.s
@@ -255,8 +248,8 @@ class FilterBench:
             await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes), stall)
         mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
         mu, chol = gpf.init(mu0, sigma0)
-        sigma = self.sigma0(sigma0)
-        await self.send("s_init", [one_beat(s.init, self.init_values(mu0, sigma0))], stall)
+        sigma = gpf.quantise_sigma(sigma0)
+        await self.send("s_init", [one_beat(s.init, self.init_values(mu, sigma0))], stall)
 
         raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
