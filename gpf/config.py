@@ -71,6 +71,8 @@ def _format_key(default: str | None = None) -> Key:
                default)
 
 
+ESS_MIN_DEFAULT = 0.0
+
 SCHEMA: dict[str, dict[str, Key]] = {
     "filter": {
         "app": _choice("bot", "uav"),
@@ -78,6 +80,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "lanes": _choice(1, 2, 4),
         "steps": _int_range(1, 100_000),
         "dt": _positive_float(),
+        # effective sample size below which a step's weights count as degenerate: the next
+        # step then samples from the predicted covariance instead of the weighted one
+        "ess_min": Key((int, float), "a number in [0, 65536]",
+                       lambda v: _finite(v) and 0 <= v <= 65536, default=ESS_MIN_DEFAULT),
     },
     "formats": {
         # bot: one format for the whole state [px, vx, py, vy]; uav: quaternion and velocity
@@ -138,6 +144,7 @@ class Config:
     steps: int
     dt: float
     formats: dict[str, Format]
+    ess_min: float
     grng: GrngConfig
     app_params: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)  # 'section.key' -> value
@@ -273,6 +280,7 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
         steps=flt["steps"],
         dt=float(flt["dt"]),
         formats=formats,
+        ess_min=float(flt["ess_min"]),
         grng=GrngConfig(**g),
         app_params=values[flt["app"]],
     )

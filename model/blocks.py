@@ -12,18 +12,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntFlag
+from typing import Any
 
 import numpy as np
 
 from gpf.model.fixed import Format, saturate, shift_round
-from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS, INV_GUARD, Const, Datapath
+from gpf.model.formats import (
+    CHOL_FLOOR_LSB,
+    CHOL_FLOOR_REL_BITS,
+    INV_GUARD,
+    SHIFT_BITS,
+    Const,
+    Datapath,
+)
 from gpf.model.primitives import div_round, sqrt_round
 
 
 class Flag(IntFlag):
     SAT = 1            # a datapath value saturated
-    ZERO_WEIGHTS = 2   # every weight was 0: the step fell back to the predicted mean
+    ZERO_WEIGHTS = 2   # no particle within the exponent's reach: equal weights (a prediction)
     NOT_PD = 4         # a Cholesky pivot was below the floor: regularised
+    LOW_ESS = 8        # effective sample size below ess_min: the predicted covariance is used
 
 
 def _any(flag: np.ndarray | bool, bit: Flag) -> int:
@@ -62,12 +71,14 @@ def cmul(raw: np.ndarray, frac: int, c: Const) -> tuple[np.ndarray, int]:
 # ---- sample_cond -----------------------------------------------------------------------------
 def sample_cond(dp: Datapath, mu: np.ndarray, chol: np.ndarray, e: np.ndarray,
                 per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
-    """x_i = mu_i + sum_{j<=i} L_ij e_j, one rounding per component. mu (n,), L (n, n), e (N, n)."""
+    """x_i = mu_i + sum_{j<=i} L_ij e_j, one rounding per component. mu (n,), L (n, n), e (N, n);
+    or mu (N, n) and L (N, n, n), one per particle (runs stacked)."""
+    mu, chol = np.asarray(mu, dtype=np.int64), np.asarray(chol, dtype=np.int64)
     out = np.empty(e.shape, dtype=np.int64)
     flags = 0
     for i in range(dp.n):
-        terms = [(np.int64(mu[i]), dp.x[i].frac_bits)]
-        terms += [(int(chol[i, j]) * e[:, j], dp.chol[i].frac_bits + dp.noise.frac_bits)
+        terms = [(mu[..., i], dp.x[i].frac_bits)]
+        terms += [(chol[..., i, j] * e[:, j], dp.chol[i].frac_bits + dp.noise.frac_bits)
                   for j in range(i + 1)]
         out[:, i], f = round_sum(terms, dp.x[i])
         flags |= f
@@ -121,7 +132,8 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
                   accel: np.ndarray, per_particle: bool = False
                   ) -> tuple[np.ndarray, np.ndarray | int]:
     """Attitude and velocity, one IMU period. x: (N, 7) [q0..q3, vE, vN, vU]; e: (N, 6) draws
-    [gyro x3, accel x3]; omega, accel: raw inputs in dp.gyro, dp.accel.
+    [gyro x3, accel x3]; omega, accel: raw inputs in dp.gyro, dp.accel, (3,) or one row per
+    particle.
 
     omega' = omega + s_w e_g and a' = a + s_a e_a (rounded to the input formats);
     h = omega' dt/2 (one word, dp.h_frac fraction bits); q'_i = q_i + sum +-h_k q_j (one
@@ -129,17 +141,18 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
     rounding, dp.accel); v'_n = v_n + f_n dt (one rounding). C uses the old q.
     """
     c, fe, flags = dp.consts, dp.noise.frac_bits, 0
+    omega, accel = np.asarray(omega, dtype=np.int64), np.asarray(accel, dtype=np.int64)
     fg, fa, fq = dp.gyro.frac_bits, dp.accel.frac_bits, dp.x[0].frac_bits
     h = []
     for k in range(3):
-        wk, f1 = round_sum([(np.int64(omega[k]), fg), cmul(e[:, k], fe, c["s_w"])], dp.gyro)
+        wk, f1 = round_sum([(omega[..., k], fg), cmul(e[:, k], fe, c["s_w"])], dp.gyro)
         prod, frac = cmul(wk, fg, c["dt2"])
         hk, f2 = _sat_word(shift_round(prod, frac - dp.h_frac, "half_up", width=62), dp.word)
         h.append(hk)
         flags |= f1 | f2
     a = []
     for m in range(3):
-        am, f = round_sum([(np.int64(accel[m]), fa), cmul(e[:, 3 + m], fe, c["s_a"])],
+        am, f = round_sum([(accel[..., m], fa), cmul(e[:, 3 + m], fe, c["s_a"])],
                           dp.accel)
         a.append(am)
         flags |= f
@@ -165,14 +178,15 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
 
 # ---- weight ----------------------------------------------------------------------------------
 def exponent_from_u(dp: Datapath, u_terms: list[np.ndarray]) -> np.ndarray:
-    """t = sum u_k^2, saturated at its maximum (2^-t is 0 there already: no flag)."""
+    """t = sum u_k^2, saturated at its maximum (beyond the exponent's reach: no flag)."""
     total = sum(np.asarray(u, dtype=np.int64) ** 2 for u in u_terms)
     t = shift_round(total, 2 * dp.u.frac_bits - dp.t.frac_bits, "half_up", width=62)
     return np.minimum(t, dp.t.max_raw)
 
 
 def whiten(dp: Datapath, d: np.ndarray, d_frac: int) -> np.ndarray:
-    """u = d * c_u in the u format, saturated (|u| >= 16 means w = 0 anyway: no flag)."""
+    """u = d * c_u in the u format, saturated (|u| >= 32 is beyond the exponent's reach: no
+    flag)."""
     prod, frac = cmul(d, d_frac, dp.consts["c_u"])
     u = shift_round(prod, frac - dp.u.frac_bits, "half_up", width=62)
     return np.clip(u, dp.u.min_raw, dp.u.max_raw)
@@ -185,37 +199,87 @@ def wrap_angle(raw: np.ndarray, frac: int) -> np.ndarray:
     return ((raw + half) % (1 << frac)) - half
 
 
-def weight_bot(dp: Datapath, x: np.ndarray, z: int, obs: tuple[int, int],
-               per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
-    """w = 2^-t, t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2; z and atan2 in turns."""
-    dx, f1 = saturate(x[:, 0] - obs[0], dp.x[0])
-    dy, f2 = saturate(x[:, 2] - obs[1], dp.x[2])
+def exponent_bot(dp: Datapath, x: np.ndarray, z: Any, obs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2, z and atan2 in turns; per particle SAT
+    marks (dx or dy saturated). z and obs = (ox, oy) are scalars or one value per particle."""
+    dx, f1 = saturate(x[:, 0] - np.asarray(obs[0], dtype=np.int64), dp.x[0])
+    dy, f2 = saturate(x[:, 2] - np.asarray(obs[1], dtype=np.int64), dp.x[2])
     theta = dp.cordic.atan2(dy, dx)
-    d = wrap_angle(np.int64(z) - theta, dp.angle_frac)
-    t = exponent_from_u(dp, [whiten(dp, d, dp.angle_frac)])
-    return dp.exp2(t), _flags(_marks(f1 | f2, Flag.SAT), len(x), per_particle)
+    d = wrap_angle(np.asarray(z, dtype=np.int64) - theta, dp.angle_frac)
+    return exponent_from_u(dp, [whiten(dp, d, dp.angle_frac)]), _marks(f1 | f2, Flag.SAT)
 
 
-def weight_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray, per_particle: bool = False
-               ) -> tuple[np.ndarray, np.ndarray | int]:
-    """w = 2^-t, t = sum_k ((v_gps,k - v_k) c_u)^2 over the 3 velocity components."""
-    flags, us = 0, []
+def exponent_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """t = sum_k ((v_gps,k - v_k) c_u)^2 over the 3 velocity components; per particle SAT marks.
+    v_gps is (3,) or one row per particle."""
+    v_gps = np.asarray(v_gps, dtype=np.int64)
+    marks, us = np.zeros(len(x), dtype=np.int64), []
     for k in range(3):
         fmt = dp.x[4 + k]
-        dv, f = saturate(np.int64(v_gps[k]) - x[:, 4 + k], fmt)
-        flags |= _marks(f, Flag.SAT)
+        dv, f = saturate(v_gps[..., k] - x[:, 4 + k], fmt)
+        marks |= _marks(f, Flag.SAT)
         us.append(whiten(dp, dv, fmt.frac_bits))
-    return dp.exp2(exponent_from_u(dp, us)), _flags(flags, len(x), per_particle)
+    return exponent_from_u(dp, us), marks
+
+
+def reach_top(dp: Datapath) -> int:
+    """The integer part of the largest exponent: where a step's running minimum starts. A step
+    whose every exponent is at least this has no particle within the exponent's reach."""
+    return dp.t.max_raw >> dp.t.frac_bits
+
+
+def relative_weights(dp: Datapath, t: np.ndarray, lanes: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Weights relative to the best particle so far, for one step's exponents t (..., N) in
+    beats of `lanes` particles.
+
+    R_b = min(R_{b-1}, min over beat b of floor(t)), R_0 = reach_top; every particle of beat b
+    gets w = 2^-(t - R_b), so the best particle of a step has w in (1/2, 1] and the weights
+    cannot all underflow. shift_b = min(R_{b-1} - R_b, 2^SHIFT_BITS - 1) (..., N / lanes) is
+    the exact power-of-two rescale of everything summed before beat b (the moments block
+    applies it; a shift as wide as an accumulator clears it, so the cap changes nothing).
+    Returns (w, shift)."""
+    top = reach_top(dp)
+    floor = t >> dp.t.frac_bits
+    beat_min = floor.reshape(*floor.shape[:-1], -1, lanes).min(axis=-1)
+    running = np.minimum.accumulate(np.minimum(beat_min, top), axis=-1)
+    before = np.concatenate([np.full(running.shape[:-1] + (1,), top, dtype=np.int64),
+                             running[..., :-1]], axis=-1)
+    offset = np.repeat(running, lanes, axis=-1) << dp.t.frac_bits
+    return dp.exp2(t - offset), np.minimum(before - running, (1 << SHIFT_BITS) - 1)
+
+
+def weight_bot(dp: Datapath, x: np.ndarray, z: Any, obs: Any, lanes: int = 1,
+               per_particle: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | int]:
+    """The weight block for one step's particles x (N, 4) in beats of `lanes`: (w, shift,
+    flags), w relative to the best particle so far (relative_weights)."""
+    t, marks = exponent_bot(dp, x, z, obs)
+    w, shift = relative_weights(dp, t, lanes)
+    return w, shift, _flags(marks, len(x), per_particle)
+
+
+def weight_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray, lanes: int = 1,
+               per_particle: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | int]:
+    """As weight_bot for the uav's GPS velocity likelihood."""
+    t, marks = exponent_uav(dp, x, v_gps)
+    w, shift = relative_weights(dp, t, lanes)
+    return w, shift, _flags(marks, len(x), per_particle)
 
 
 # ---- moments ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Sums:
-    """What the moments block accumulates at line rate (exact integers)."""
+    """What the moments block accumulates at line rate, per run (object arrays of exact
+    integers, leading axis R): every sum rescaled by each beat's shift before the beat is added
+    (round half up: acc <- round(acc 2^-shift) + beat), so all are relative to the step's best
+    particle."""
 
-    w: int                  # sum w, weight fraction bits
-    s1: list[int]           # sum w dx_i, fraction bits weight + x_i
-    s2: dict[tuple[int, int], int]  # sum p_i dx_j (i >= j), fraction x_i + x_j + p_guard
+    w: np.ndarray           # (R,) sum w, weight fraction bits
+    s1: np.ndarray          # (R, n) sum w dx_i, fraction weight + x_i
+    s2: np.ndarray          # (R, P) sum p_i dx_j over the pairs, fraction x_i + x_j + p_guard
+    ww: np.ndarray          # (R,) sum w^2 (rescaled by 2 shift), fraction 2 x weight
+    in_reach: np.ndarray    # (R,) bool: some beat moved the running minimum below reach_top
     p_guard: int            # p_i = w dx_i keeps this many bits below x_i's LSB
 
 
@@ -225,88 +289,170 @@ def product_guard(dp: Datapath) -> int:
     return max(0, min(dp.weight.frac_bits, 62 - 2 * dp.word))
 
 
-def exact_sum(values: np.ndarray) -> int:
-    """The exact sum of int64 values of up to 62 bits (what a wide accumulator holds)."""
-    high = values >> 31
-    low = values & ((1 << 31) - 1)
-    return (int(high.sum(dtype=np.int64)) << 31) + int(low.sum(dtype=np.int64))
+def round_shift(acc: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """round(acc 2^-shift), half up, on object arrays of Python ints (any shift >= 0)."""
+    shift = np.asarray(shift).astype(object)
+    return (acc + ((1 << shift) >> 1)) >> shift
 
 
-def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
-               pairs: list[tuple[int, int]]) -> tuple[Sums, int]:
-    """One pass: dx = x - ref (saturated), W, S1 and S2 over the given (i, j) pairs."""
-    flags = 0
-    dx = np.empty_like(x)
-    for i in range(dp.n):
-        dx[:, i], f = saturate(x[:, i] - ref[i], dp.x[i])
-        flags |= _any(f, Flag.SAT)
+_LOW = (1 << 31) - 1
+
+
+def rescaled_sums(values: np.ndarray, shift: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per run, acc <- round_shift(acc, shift_b scale) + (sum of beat b's values) over beats b.
+
+    values (R, N, A) int64 terms of up to 62 bits, one column per accumulator; shift (R, B)
+    with N = B x lanes; scale (A,) how many times the shift each accumulator takes. Exact: the
+    beats between two rescales are summed as 31-bit halves in int64, and only those segment
+    sums (a few per step: the running minimum falls rarely) go through Python integers.
+    Returns (R, A) object array."""
+    runs, n, cols = values.shape
+    beats = shift.shape[1]
+    lanes = n // beats
+    halves = [(values >> 31), (values & _LOW)]
+    cums = []
+    for h in halves:
+        beat = h.reshape(runs, beats, lanes, cols).sum(axis=2)
+        cums.append(np.concatenate([np.zeros((runs, 1, cols), np.int64),
+                                    np.cumsum(beat, axis=1)], axis=1))
+    event = shift > 0
+    event[:, 0] = False                          # nothing is summed before the first beat
+    seg = np.cumsum(event, axis=1)               # each beat's segment
+    kmax = int(seg[:, -1].max()) + 1
+    er, eb = np.nonzero(event)
+    starts = np.full((runs, kmax), beats, dtype=np.int64)
+    starts[:, 0] = 0
+    starts[er, seg[er, eb]] = eb
+    ends = np.concatenate([starts[:, 1:], np.full((runs, 1), beats, np.int64)], axis=1)
+    seg_shift = np.zeros((runs, kmax), dtype=np.int64)
+    seg_shift[er, seg[er, eb]] = shift[er, eb]
+    rows = np.arange(runs)[:, None]
+    hi, lo = ((c[rows, ends] - c[rows, starts]) for c in cums)      # (R, kmax, A)
+    acc = np.zeros((runs, cols), dtype=object)
+    for k in range(kmax):
+        if k:
+            acc = round_shift(acc, seg_shift[:, k, None] * scale[None, :])
+        acc = acc + (hi[:, k].astype(object) << 31) + lo[:, k].astype(object)
+    return acc
+
+
+def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
+               ref: np.ndarray, pairs: list[tuple[int, int]]) -> tuple[Sums, np.ndarray]:
+    """One pass per run: dx = x - ref (saturated), W, S1, S2 and sum w^2, rescaled by the
+    weight block's shifts. x (R, N, n), w (R, N), shift (R, B), ref (R, n). Flags per run."""
+    runs, n_part, n = x.shape
+    dx, f = _saturate_columns(dp, x - ref[:, None, :])
+    flags = np.where(np.any(f, axis=(1, 2)), np.int64(Flag.SAT), np.int64(0))
     guard = product_guard(dp)
-    wdx = w[:, None] * dx                       # exact: weight x state bits
+    wdx = w[..., None] * dx                       # exact: weight x state bits
     p = shift_round(wdx, dp.weight.frac_bits - guard, "half_up", width=62)  # |w| <= 1
-    s1 = [exact_sum(wdx[:, i]) for i in range(dp.n)]
-    s2 = {(i, j): exact_sum(p[:, i] * dx[:, j]) for i, j in pairs}
-    return Sums(int(w.sum(dtype=np.int64)), s1, s2, guard), flags
+    cols = [w[..., None], wdx]
+    cols += [(p[..., i] * dx[..., j])[..., None] for i, j in pairs]
+    cols.append((w * w)[..., None])
+    scale = np.array([1] * (1 + n + len(pairs)) + [2], dtype=np.int64)
+    acc = rescaled_sums(np.concatenate(cols, axis=-1), shift, scale)
+    in_reach = np.any(shift > 0, axis=1)
+    sums = Sums(acc[:, 0], acc[:, 1:1 + n], acc[:, 1 + n:1 + n + len(pairs)], acc[:, -1],
+                in_reach, guard)
+    return sums, flags
+
+
+def _saturate_columns(dp: Datapath, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """saturate() of each state component into its own format (..., n)."""
+    out, flag = np.empty_like(v), np.empty(v.shape, dtype=bool)
+    for i, fmt in enumerate(dp.x):
+        out[..., i], flag[..., i] = saturate(v[..., i], fmt)
+    return out, flag
+
+
+def _sat_obj(v: np.ndarray, fmt: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Clamp an object array of ints into fmt: (int64 values, flags)."""
+    lo, hi = fmt.min_raw, fmt.max_raw
+    flag = np.array([(x < lo) or (x > hi) for x in v.flat], dtype=bool).reshape(v.shape)
+    out = np.array([min(max(x, lo), hi) for x in v.flat], dtype=np.int64).reshape(v.shape)
+    return out, flag
 
 
 def finalise(dp: Datapath, sums: Sums, ref: np.ndarray, pairs: list[tuple[int, int]]
-             ) -> tuple[np.ndarray, dict[tuple[int, int], int], int]:
-    """mu = ref + S1/W; Sigma_ij = S2_ij/W - m_i m_j (exact divisions, one rounding each).
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """mu = ref + S1/W; Sigma_ij = S2_ij/W - m_i m_j; ESS = W^2 / sum w^2 (exact divisions, one
+    rounding each), per run. W > 0: the best particle's weight is at least 1/2.
 
     m_i = S1_i / W carries CHOL_SHIFT extra fraction bits, so m_i m_j has Sigma's fraction.
-    Returns mu (state formats), Sigma entries (raw, fraction dp.cov_frac(i, j)) and flags.
-    """
-    flags = 0
-    m = []
+    Returns mu (R, n) state formats, Sigma (R, P) raw (fraction dp.cov_frac(i, j)), ESS (R,)
+    in dp.ess, flags (R,)."""
+    runs = len(sums.w)
+    flags = np.zeros(runs, dtype=np.int64)
+    m, mu = [], np.empty((runs, dp.n), dtype=np.int64)
     for i in range(dp.n):
         shift = dp.chol[i].frac_bits - dp.x[i].frac_bits
-        m.append(int(div_round(sums.s1[i], sums.w, shift)))  # fraction chol_i
-    mu = np.empty(dp.n, dtype=np.int64)
-    for i in range(dp.n):
-        shift = dp.chol[i].frac_bits - dp.x[i].frac_bits
-        value = int(ref[i]) + int(shift_round(m[i], shift, "half_up", width=62))
-        mu[i], f = saturate(value, dp.x[i])
-        flags |= _any(f, Flag.SAT)
-    sigma = {}
-    for i, j in pairs:
+        m.append(div_round(sums.s1[:, i], sums.w, shift))            # fraction chol_i
+        half = (1 << shift) >> 1
+        value = ref[:, i].astype(object) + ((m[i] + half) >> shift)
+        mu[:, i], f = _sat_obj(value, dp.x[i])
+        flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
+    sigma = np.empty((runs, len(pairs)), dtype=np.int64)
+    for q, (i, j) in enumerate(pairs):
         # S2: fraction x_i + x_j + guard; W: weight fraction; Sigma_ij: cov_frac(i, j)
         shift = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits
                  - dp.x[j].frac_bits - sums.p_guard)
-        value = int(div_round(sums.s2[(i, j)], sums.w, shift)) - m[i] * m[j]
-        sigma[(i, j)], f = saturate(value, dp.sigma(i, j))
-        flags |= _any(f, Flag.SAT)
-    return mu, sigma, flags
+        value = div_round(sums.s2[:, q], sums.w, shift) - m[i] * m[j]
+        sigma[:, q], f = _sat_obj(value, dp.sigma(i, j))
+        flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
+    ess, _ = _sat_obj(div_round(sums.w * sums.w, sums.ww, dp.ess.frac_bits), dp.ess)
+    flags |= np.where(sums.in_reach, np.int64(0), np.int64(Flag.ZERO_WEIGHTS))
+    return mu, sigma, ess, flags
 
 
-def normalise_quaternion(dp: Datapath, mu: np.ndarray) -> tuple[np.ndarray, int]:
-    """uav: q_hat = q / |q| (exact: |q| by a square root with CHOL_SHIFT guard bits, then 4
-    rounded divisions). A zero quaternion is left as it is."""
+def normalise_quaternion(dp: Datapath, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """uav: q_hat = q / |q| for mu (R, n) (exact: |q| by a square root with CHOL_SHIFT guard
+    bits, then 4 rounded divisions). A zero quaternion is left as it is. Returns (mu, flags)."""
     fq = dp.x[0].frac_bits
-    norm2 = sum(int(mu[i]) ** 2 for i in range(4))               # fraction 2 fq
-    if norm2 == 0:
-        return mu, 0
+    q = _obj(mu[:, :4])
+    norm2 = np.sum(q * q, axis=1)                                 # fraction 2 fq
+    zero = np.asarray(norm2 == 0, dtype=bool)
     guard = dp.chol[0].frac_bits - fq
-    norm = int(sqrt_round(norm2, 2 * fq, fq + guard))            # fraction fq + guard
-    out, flags = mu.copy(), 0
+    norm = _obj(sqrt_round(np.where(zero, 1, norm2), 2 * fq, fq + guard))  # fraction fq + guard
+    out, flags = mu.copy(), np.zeros(len(mu), dtype=np.int64)
     for i in range(4):
-        out[i], f = saturate(int(div_round(int(mu[i]), norm, fq + guard)), dp.x[i])
-        flags |= _any(f, Flag.SAT)
+        value, f = _sat_obj(div_round(q[:, i], norm, fq + guard), dp.x[i])
+        out[:, i] = np.where(zero, mu[:, i], value)
+        flags |= np.where(f & ~zero, np.int64(Flag.SAT), np.int64(0))
     return out, flags
 
 
-def moments(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
-            pairs: list[tuple[int, int]]) -> tuple[np.ndarray, dict[tuple[int, int], int], int]:
-    """The moments block over one step's particles: mu (uav: quaternion normalised) and Sigma.
-    Every weight 0: mu = ref, Sigma = 0 and Flag.ZERO_WEIGHTS (the filter keeps its previous
-    Sigma and L)."""
-    sums, flags = accumulate(dp, x, w, ref, pairs)
-    if sums.w == 0:
-        return ref.copy(), dict.fromkeys(pairs, 0), flags | Flag.ZERO_WEIGHTS
-    mu, sigma, f = finalise(dp, sums, ref, pairs)
-    flags |= f
+@dataclass(frozen=True)
+class MomentsResult:
+    """The moments block's result beat for R runs."""
+
+    mu: np.ndarray       # (R, n) state formats (uav: quaternion normalised)
+    sigma: np.ndarray    # (R, P) raw, the pairs' order
+    ess: np.ndarray      # (R,) raw, dp.ess
+    flags: np.ndarray    # (R,) SAT, ZERO_WEIGHTS
+
+
+def moments_batch(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
+                  ref: np.ndarray, pairs: list[tuple[int, int]]) -> MomentsResult:
+    """The moments block over one step's particles of R runs (see accumulate). No particle
+    within reach (every exponent >= reach_top) gives every particle the same weight: mu and
+    Sigma are then the predicted mean and spread, and ZERO_WEIGHTS says so."""
+    sums, flags = accumulate(dp, x, w, shift, ref, pairs)
+    mu, sigma, ess, f = finalise(dp, sums, ref, pairs)
+    flags = flags | f
     if dp.app == "uav":
-        mu, f = normalise_quaternion(dp, mu)
-        flags |= f
-    return mu, sigma, flags
+        mu, fq = normalise_quaternion(dp, mu)
+        flags = flags | fq
+    return MomentsResult(mu, sigma, ess, flags)
+
+
+def moments(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray, ref: np.ndarray,
+            pairs: list[tuple[int, int]]
+            ) -> tuple[np.ndarray, dict[tuple[int, int], int], int, int]:
+    """moments_batch for one step: x (N, n), w (N,), shift (B,), ref (n,); returns mu, Sigma
+    by pair, ESS (raw) and flags."""
+    res = moments_batch(dp, x[None], w[None], shift[None], np.asarray(ref)[None], pairs)
+    sigma = {pr: int(v) for pr, v in zip(pairs, res.sigma[0], strict=True)}
+    return res.mu[0], sigma, int(res.ess[0]), int(res.flags[0])
 
 
 def cov_pairs(dp: Datapath, covariance: str) -> list[tuple[int, int]]:
@@ -317,39 +463,98 @@ def cov_pairs(dp: Datapath, covariance: str) -> list[tuple[int, int]]:
     return pairs
 
 
+# ---- predicted covariance (ctrl) -------------------------------------------------------------
+def predicted_sigma(dp: Datapath, sigma: np.ndarray, pairs: list[tuple[int, int]]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """F Sigma F^T + Q of R covariances (R, P) raw, the pairs' order, as float_blocks'
+    predicted_covariance: bot Phi (T and T2 = T^2 as constants) and Gamma Q Gamma^T (q_pp, q_pv,
+    q_vv per axis); uav the identity and q_q, q_v on the diagonal. Every entry one exact sum,
+    rounded half up once into its format and saturated (flag SAT). Returns (Sigma, flags)."""
+    index = {pr: q for q, pr in enumerate(pairs)}
+    c = dp.consts
+
+    def entry(a: int, b: int) -> tuple[np.ndarray, int]:
+        return _obj(sigma[:, index[(max(a, b), min(a, b))]]), dp.cov_frac(a, b)
+
+    out = np.empty_like(sigma, dtype=np.int64)
+    flags = np.zeros(len(sigma), dtype=np.int64)
+    for q, (i, j) in enumerate(pairs):
+        terms = [entry(i, j)]
+        if dp.app == "bot":
+            # Phi = I + T E (E: position <- velocity): Sigma + T (E S + S E^T) + T^2 E S E^T
+            for cond, (a, b), k in ((i % 2 == 0, (i + 1, j), "T"), (j % 2 == 0, (i, j + 1), "T"),
+                                    (i % 2 == 0 and j % 2 == 0, (i + 1, j + 1), "T2")):
+                if cond:
+                    raw, frac = entry(a, b)
+                    terms.append((raw * c[k].raw, frac + c[k].frac))
+            if i // 2 == j // 2:
+                k = {(0, 0): "q_pp", (1, 0): "q_pv", (1, 1): "q_vv"}[(i % 2, j % 2)]
+                terms.append((_obj(np.full(len(sigma), c[k].raw)), c[k].frac))
+        elif i == j:
+            k = "q_q" if i < 4 else "q_v"
+            terms.append((_obj(np.full(len(sigma), c[k].raw)), c[k].frac))
+        top = max(f for _, f in terms)
+        total = sum(raw * (1 << (top - f)) for raw, f in terms)
+        shift = top - dp.cov_frac(i, j)
+        value = (total + ((1 << shift) >> 1)) >> shift
+        out[:, q], f = _sat_obj(value, dp.sigma(i, j))
+        flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
+    return out, flags
+
+
 # ---- cholesky --------------------------------------------------------------------------------
-def cholesky(dp: Datapath, sigma: dict[tuple[int, int], int]) -> tuple[np.ndarray, int]:
-    """L with Sigma = L L^T: n square roots, n reciprocals, exact integer arithmetic.
+def _obj(a: Any) -> np.ndarray:
+    """An object array of Python ints (exact at any width)."""
+    out = np.empty(np.size(a), dtype=object)
+    out[:] = [int(v) for v in np.ravel(a)]
+    return out.reshape(np.shape(a))
+
+
+def cholesky_batch(dp: Datapath, sigma: np.ndarray, pairs: list[tuple[int, int]]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """L with Sigma = L L^T for R matrices at once: sigma (R, P) raw in the pairs' order; n
+    square roots, n reciprocals, exact integer arithmetic. Returns L (R, n, n) and flags (R,).
 
     A pivot below max((CHOL_FLOOR_LSB LSB of L)^2, Sigma_jj 2^-CHOL_FLOOR_REL_BITS) is raised
-    to that floor and its column below the
-    diagonal set to 0 (flag NOT_PD): the filter keeps a valid factor when the covariance is
-    singular or not positive definite.
+    to that floor and its column below the diagonal set to 0 (flag NOT_PD): the filter keeps a
+    valid factor when the covariance is singular or not positive definite.
     """
-    n, flags = dp.n, 0
-    chol = np.zeros((n, n), dtype=np.int64)
+    n, runs = dp.n, len(sigma)
+    col = {pr: _obj(sigma[:, q]) for q, pr in enumerate(pairs)}
+    chol = [[_obj(np.zeros(runs, np.int64)) for _ in range(n)] for _ in range(n)]
+    flags = np.zeros(runs, dtype=np.int64)
     for j in range(n):
         fj = dp.chol[j].frac_bits
-        d = sigma[(j, j)] - sum(int(chol[j, k]) ** 2 for k in range(j))   # fraction 2 fj
+        d = col[(j, j)] - sum((chol[j][k] * chol[j][k] for k in range(j)), _obj(0))
         # below a floor relative to the diagonal the pivot is rounding residue of a (near)
         # singular direction: give it the floor's spread and no correlation rather than
         # divide that residue by a tiny pivot
-        floor = max(CHOL_FLOOR_LSB**2, sigma[(j, j)] >> CHOL_FLOOR_REL_BITS)
-        floored = d < floor
-        if floored:
-            d, flags = floor, flags | Flag.NOT_PD
-        ljj, f = saturate(int(sqrt_round(d, 2 * fj, fj)), dp.chol[j])
-        chol[j, j] = ljj
-        flags |= _any(f, Flag.SAT)
-        if floored:
-            continue
-        inv = int(div_round(1, int(ljj), 2 * fj + INV_GUARD))   # 1/L_jj, fraction fj + G
+        rel = col[(j, j)] >> CHOL_FLOOR_REL_BITS
+        floor = np.where(rel > CHOL_FLOOR_LSB**2, rel, CHOL_FLOOR_LSB**2)
+        floored = np.asarray(d < floor, dtype=bool)
+        flags |= np.where(floored, np.int64(Flag.NOT_PD), np.int64(0))
+        d = np.where(floored, floor, d)
+        ljj, f = saturate(sqrt_round(d, 2 * fj, fj), dp.chol[j])
+        chol[j][j] = _obj(ljj)
+        flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
+        inv = _obj(div_round(1, ljj, 2 * fj + INV_GUARD))        # 1/L_jj, fraction fj + G
         for i in range(j + 1, n):
-            if (i, j) not in sigma:
+            if (i, j) not in col:
                 continue
-            num = sigma[(i, j)] - sum(int(chol[i, k]) * int(chol[j, k]) for k in range(j))
+            num = col[(i, j)] - sum((chol[i][k] * chol[j][k] for k in range(j)), _obj(0))
             # num: fraction fi + fj; inv: fj + G; L_ij: fi
-            value = int(shift_round(num * inv, 2 * fj + INV_GUARD, "half_up", width=200))
-            chol[i, j], f = saturate(value, dp.chol[i])
-            flags |= _any(f, Flag.SAT)
-    return chol, flags
+            half = 1 << (2 * fj + INV_GUARD - 1)
+            value, f = saturate((num * inv + half) >> (2 * fj + INV_GUARD), dp.chol[i])
+            chol[i][j] = _obj(np.where(floored, 0, value))
+            flags |= np.where(f & ~floored, np.int64(Flag.SAT), np.int64(0))
+    out = np.array([[[int(chol[i][j][r]) for j in range(n)] for i in range(n)]
+                    for r in range(runs)], dtype=np.int64).reshape(runs, n, n)
+    return out, flags
+
+
+def cholesky(dp: Datapath, sigma: dict[tuple[int, int], int]) -> tuple[np.ndarray, int]:
+    """cholesky_batch of one matrix given by pair: (L (n, n), flags)."""
+    pairs = list(sigma)
+    chol, flags = cholesky_batch(dp, np.array([[sigma[p] for p in pairs]], dtype=object),
+                                 pairs)
+    return chol[0], int(flags[0])

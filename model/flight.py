@@ -13,6 +13,7 @@ then the RK4 integral, on sub-steps, of q_dot = 1/2 q (x) [0, omega] and v_dot =
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -84,6 +85,13 @@ def _deriv(s: list[float], w: Array, f: Array) -> list[float]:
 
 
 def integrate(steps: int, dt: float, substeps: int = 4) -> tuple[Array, Array, Array]:
+    """As _integrate (computed once per arguments: every run of a Monte Carlo study flies the
+    same profile); the arrays are the caller's own copies."""
+    return tuple(a.copy() for a in _integrate(steps, dt, substeps))
+
+
+@functools.lru_cache(maxsize=4)
+def _integrate(steps: int, dt: float, substeps: int) -> tuple[Array, Array, Array]:
     """Truth (steps+1, 7) by RK4 on `substeps` sub-steps per dt, and the body rate and specific
     force averaged over each interval [t_{k-1}, t_k] (steps, 3) (Simpson on the RK4 nodes), as
     an integrating IMU reports them (delta-angle / dt, delta-velocity / dt, no coning or

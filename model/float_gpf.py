@@ -17,14 +17,20 @@ import numpy as np
 from gpf.model.float_blocks import (
     FLAGS,
     GRAVITY,
+    LOW_ESS,
     NOT_PD,
     ZERO_WEIGHTS,
     Array,
     cholesky,
+    effective_sample_size,
+    exponent_bot,
+    exponent_uav,
     moments,
     omega_matrix,
+    predicted_covariance,
     propagate_bot,
     propagate_uav,
+    relative_weights,
     rotation_matrix,
     sample_cond,
     weight_bot,
@@ -34,10 +40,10 @@ from gpf.model.float_blocks import (
 from gpf.model.scenarios import Scenario
 
 __all__ = [
-    "FLAGS", "GRAVITY", "NOT_PD", "ZERO_WEIGHTS", "FloatGPF", "RunResult", "StepResult",
-    "attitude_error_deg", "cholesky", "draw_count", "moments", "omega_matrix",
+    "FLAGS", "GRAVITY", "NOT_PD", "ZERO_WEIGHTS", "BatchStep", "FloatGPF", "RunResult",
+    "StepResult", "attitude_error_deg", "cholesky", "draw_count", "moments", "omega_matrix",
     "position_error", "position_rmse", "propagate_bot", "propagate_uav", "rotation_matrix",
-    "sample_cond", "state_size", "weight_bot", "weight_uav", "wrap_angle",
+    "sample_cond", "stack_inputs", "state_size", "weight_bot", "weight_uav", "wrap_angle",
 ]
 
 
@@ -69,6 +75,26 @@ class StepResult:
         """Effective sample size (sum w)^2 / sum w^2; 0 when every weight is zero."""
         s2 = float(self.w @ self.w)
         return self.W * self.W / s2 if s2 > 0 else 0.0
+
+
+@dataclass
+class BatchStep:
+    """One step of R runs (leading axis R everywhere)."""
+
+    mu: Array                       # (R, n)
+    Sigma: Array                    # (R, n, n)
+    L: Array                        # (R, n, n)
+    flags: dict[str, np.ndarray]    # name -> (R,) bool
+    ess: Array                      # (R,)
+    ref: Array                      # (R, n)
+    x_cond: Array                   # (R, N, n)
+    x: Array                        # (R, N, n)
+    w: Array                        # (R, N)
+
+
+def stack_inputs(inputs: list[Mapping[str, Any]]) -> dict[str, Array]:
+    """Per-step inputs of R runs (Scenario.step_inputs each) as arrays with a run axis."""
+    return {key: np.array([np.asarray(i[key], dtype=float) for i in inputs]) for key in inputs[0]}
 
 
 @dataclass
@@ -107,34 +133,56 @@ class FloatGPF:
             raise ValueError("uav: no initial estimate (scenario.mu0 and truth at k = 0 missing)")
         return mu0, np.diag(np.array(p["sigma0_diag"], dtype=float))
 
+    def step_batch(self, mu: Array, L: Array, inputs: Mapping[str, Array],  # noqa: N803
+                   draws: Array, sigma_prev: Array | None = None) -> BatchStep:
+        """One filter step of R runs from (mu, L) (R, n), (R, n, n) with their inputs stacked
+        (stack_inputs) and draws (R, N, D). sigma_prev (R, n, n): the covariance the step
+        samples from (default L L^T); its prediction replaces the weighted covariance of a step
+        whose effective sample size is below cfg.ess_min (flag "low_ess")."""
+        n, cfg = self.n, self.cfg
+        draws = np.asarray(draws, dtype=float)
+        if draws.ndim != 3 or draws.shape[2] != self.draws_per_particle:
+            raise ValueError(f"draws: shape {draws.shape}, expected (R, N, "
+                             f"{self.draws_per_particle})")
+        x_cond = sample_cond(mu, L, draws[..., :n])
+        if self.app == "bot":
+            x = propagate_bot(x_cond, draws[..., 4:6], cfg)
+            ref = propagate_bot(mu, np.zeros(mu.shape[:-1] + (2,)), cfg)
+            t = exponent_bot(x, inputs["z"], inputs["observer"], cfg)
+        else:
+            omega, accel = inputs["omega"], inputs["accel"]
+            x = propagate_uav(x_cond, draws[..., 7:10], draws[..., 10:13], omega, accel, cfg)
+            zero = np.zeros(mu.shape[:-1] + (1, 3))
+            ref = propagate_uav(mu[..., None, :], zero, zero, omega, accel, cfg)[..., 0, :]
+            t = exponent_uav(x, inputs["v_gps"], cfg)
+        w, out_of_reach = relative_weights(t)
+        mu_k, sigma_k = moments(x, w, ref, self.app, self.covariance)
+        ess = effective_sample_size(w)
+        low = ess < cfg.ess_min
+        if np.any(low):
+            prev = L @ np.swapaxes(L, -1, -2) if sigma_prev is None else sigma_prev
+            sigma_k = np.where(low[..., None, None], predicted_covariance(prev, cfg), sigma_k)
+        chol_k, not_pd = cholesky(sigma_k)
+        return BatchStep(mu_k, sigma_k, chol_k,
+                         {ZERO_WEIGHTS: out_of_reach, NOT_PD: not_pd, LOW_ESS: low}, ess, ref,
+                         x_cond, x, w)
+
     def step(self, mu: Array, L: Array, inputs_k: Mapping[str, Any],  # noqa: N803
-             draws: Array) -> StepResult:
+             draws: Array, sigma_prev: Array | None = None) -> StepResult:
         """One filter step from (mu_{k-1}, L_{k-1}) with the step's inputs and draws (N, D).
 
         inputs_k: bot {"z": bearing, "observer": (ox, oy)}; uav {"omega": (3,), "accel": (3,),
         "v_gps": (3,)} (Scenario.step_inputs(k) builds it).
         """
-        n, cfg = self.n, self.cfg
         draws = np.asarray(draws, dtype=float)
         if draws.ndim != 2 or draws.shape[1] != self.draws_per_particle:
             raise ValueError(f"draws: shape {draws.shape}, expected (N, {self.draws_per_particle})")
-        x_cond = sample_cond(mu, L, draws[:, :n])
-        if self.app == "bot":
-            x = propagate_bot(x_cond, draws[:, 4:6], cfg)
-            ref = propagate_bot(mu[None, :], np.zeros((1, 2)), cfg)[0]
-            w = weight_bot(x, float(inputs_k["z"]), np.asarray(inputs_k["observer"], float), cfg)
-        else:
-            omega = np.asarray(inputs_k["omega"], dtype=float)
-            accel = np.asarray(inputs_k["accel"], dtype=float)
-            x = propagate_uav(x_cond, draws[:, 7:10], draws[:, 10:13], omega, accel, cfg)
-            zero = np.zeros((1, 3))
-            ref = propagate_uav(mu[None, :], zero, zero, omega, accel, cfg)[0]
-            w = weight_uav(x, np.asarray(inputs_k["v_gps"], dtype=float), cfg)
-        mu_k, sigma_k, flags = moments(x, w, ref, self.app, self.covariance,
-                                       sigma_prev=L @ L.T)
-        chol_k, chol_flags = cholesky(sigma_k)
-        return StepResult(mu_k, sigma_k, chol_k, flags | chol_flags, ref, x_cond, x, w,
-                          float(np.sum(w)))
+        prev = None if sigma_prev is None else np.asarray(sigma_prev, float)[None]
+        res = self.step_batch(np.asarray(mu, float)[None], np.asarray(L, float)[None],
+                              stack_inputs([inputs_k]), draws[None], prev)
+        flags = {name for name, on in res.flags.items() if on[0]}
+        return StepResult(res.mu[0], res.Sigma[0], res.L[0], flags, res.ref[0], res.x_cond[0],
+                          res.x[0], res.w[0], float(np.sum(res.w[0])))
 
     def run(self, scenario: Scenario, draws: Array | None = None,
             rng: np.random.Generator | None = None) -> RunResult:
@@ -161,8 +209,8 @@ class FloatGPF:
         out_mu[0], out_sigma[0] = mu, sigma
         for k in range(1, steps + 1):
             block = draws[k - 1] if draws is not None else rng.standard_normal(shape)
-            res = self.step(mu, chol, scenario.step_inputs(k), block)
-            mu, chol = res.mu, res.L
+            res = self.step(mu, chol, scenario.step_inputs(k), block, sigma)
+            mu, chol, sigma = res.mu, res.L, res.Sigma
             out_mu[k], out_sigma[k], ess[k] = res.mu, res.Sigma, res.ess
             for name in res.flags:
                 flags[name][k] = True

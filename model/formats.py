@@ -19,8 +19,14 @@ CHOL_SHIFT = 3       # L entries carry up to 3 more fraction bits than the state
 INV_GUARD = 8        # extra fraction bits of 1/L_jj in the Cholesky
 CHOL_FLOOR_LSB = 16  # regularisation: a Cholesky pivot below (16 LSB of L)^2 or below
 CHOL_FLOOR_REL_BITS = 16  # 2^-16 of its diagonal entry is raised to that floor
-T_INT_BITS = 8       # 2^-t underflows to 0 long before t = 256
-U_INT_BITS = 4       # u = whitened innovation, t = u^2 (or a sum of squares) < 256
+ESS_FRAC = 4         # fraction bits of the effective sample size W^2 / sum w^2
+# The exponent t of a weight 2^-t reaches as far as float64's own exp(-d^2/2) (which
+# underflows near t = 1075): weights are relative to the best particle, so a cloud far from the
+# measurement still needs its ordering. Beyond the reach (every t >= 2^T_INT_BITS - 1) the
+# measurement is ignored.
+T_INT_BITS = 10      # t < 1024: 37.7 sigma in one dimension
+U_INT_BITS = 5       # u = whitened innovation, |u| < 32, so each u^2 < 1024
+SHIFT_BITS = 7       # the rescale of a beat is at most 127 (it clears any accumulator)
 UAV_GYRO_INT_BITS = 2    # body rates within +-4 rad/s
 UAV_ACCEL_INT_BITS = 6   # specific force within +-64 m/s^2 (6.5 g)
 GRAVITY = (0.0, 0.0, -9.8)
@@ -77,6 +83,8 @@ class Datapath:
     accel: Format | None = None   # specific force, m/s^2 (also the C(q) a + g sum)
     rot: Format | None = None     # entries of C(q)
     h_frac: int = 0               # uav: h = omega dt/2 kept in one word with these fraction bits
+    ess: Format = Format(False, 12, ESS_FRAC)   # W^2 / sum w^2: up to the config's maximum N
+    ess_min: int = 0              # raw (ess format): below it a step's weights are degenerate
 
     @property
     def n(self) -> int:
@@ -121,7 +129,7 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
     w = x[0].width
     chol = tuple(shifted(fmt, min(CHOL_SHIFT, fmt.int_bits)) for fmt in x)
     u = Format(True, U_INT_BITS, w - 1 - U_INT_BITS)
-    t = Format(False, T_INT_BITS, w - T_INT_BITS)
+    t = Format(False, T_INT_BITS, w - 8)           # W - 8 fraction bits, whatever the reach
     p = cfg.app_params
     log2e = math.log2(math.e)
     if cfg.app == "bot":
@@ -132,10 +140,14 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
             "b": Const.of(dt * math.sqrt(q)),            # velocity gain
             # u = d * c_u with d in turns: u^2 = d_rad^2 / (2 R) * log2(e)
             "c_u": Const.of(2 * math.pi * math.sqrt(log2e / (2 * p["bearing_var"]))),
+            # the predicted covariance Phi Sigma Phi^T + Gamma Q Gamma^T (low ESS)
+            "T2": Const.of(dt * dt),
+            "q_pp": Const.of(q * dt**4 / 4), "q_pv": Const.of(q * dt**3 / 2),
+            "q_vv": Const.of(q * dt * dt),
         }
         cordic = Cordic.for_widths(w, w)
         return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts, cordic,
-                        _exp2(t, weight))
+                        _exp2(t, weight), ess=_ess(cfg), ess_min=_ess_min(cfg))
     dt = cfg.dt
     consts = {
         "c_u": Const.of(math.sqrt(log2e / 2) / p["sigma_v"]),
@@ -144,6 +156,9 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
         "s_w": Const.of(math.radians(p["sigma_omega_deg"])),
         "s_a": Const.of(p["sigma_a"]),
         **{f"g{n}": Const.of(g) for n, g in enumerate(GRAVITY)},
+        # the predicted covariance Sigma + Q, the IMU noise of one step (low ESS)
+        "q_q": Const.of((dt / 2 * math.radians(p["sigma_omega_deg"])) ** 2),
+        "q_v": Const.of((p["sigma_a"] * dt) ** 2),
     }
     gyro = Format(True, UAV_GYRO_INT_BITS, w - 1 - UAV_GYRO_INT_BITS)
     accel = Format(True, UAV_ACCEL_INT_BITS, w - 1 - UAV_ACCEL_INT_BITS)
@@ -151,7 +166,18 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
     h_frac = w - 1 - UAV_GYRO_INT_BITS - (math.floor(math.log2(dt / 2)) + 1)
     return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts,
                     None, _exp2(t, weight), gyro=gyro, accel=accel,
-                    rot=Format(True, 1, w - 2), h_frac=h_frac)
+                    rot=Format(True, 1, w - 2), h_frac=h_frac, ess=_ess(cfg), ess_min=_ess_min(cfg))
+
+
+def _ess_min(cfg: Config) -> int:
+    """cfg.ess_min in the ESS format, rounded half up (capped at its largest value)."""
+    fmt = _ess(cfg)
+    return min(math.floor(cfg.ess_min * 2**fmt.frac_bits + 0.5), fmt.max_raw)
+
+
+def _ess(cfg: Config) -> Format:
+    """ESS <= N (Cauchy-Schwarz; the rescales' roundings can add a little: one more bit)."""
+    return Format(False, cfg.particles.bit_length() + 1, ESS_FRAC)
 
 
 def _exp2(t: Format, weight: Format) -> Exp2Neg:
@@ -169,7 +195,7 @@ def constants(dp: Datapath) -> dict:
         "consts": {k: {"value": c.value, "raw": c.raw, "frac": c.frac}
                    for k, c in sorted(dp.consts.items())},
         "chol_floor_lsb": CHOL_FLOOR_LSB, "chol_floor_rel_bits": CHOL_FLOOR_REL_BITS,
-        "inv_guard": INV_GUARD,
+        "inv_guard": INV_GUARD, "ess": str(dp.ess), "ess_min": dp.ess_min,
         "exp2": dp.exp2.constants(),
     }
     if dp.cordic is not None:

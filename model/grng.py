@@ -295,6 +295,58 @@ class GrngModel:
         return self.out.to_real(self.normals_raw(n, seed))
 
 
+_MANY_LEVELS = 10   # many streams: double to 2^10 states each, then jump 2^10 at a time
+_WIDE_MANY: dict[int, np.ndarray] = {}
+
+
+def component_states_many(z0: np.ndarray, component: int, n: int) -> np.ndarray:
+    """component_states of many streams of one component at once: z0 (S,) -> (S, n). Every
+    stream of a component steps by the same linear map, so the doubling and the jumps act on
+    all of them in one numpy operation (the jumps through 16-bit tables: 4 lookups a state)."""
+    maps = _powers(component)
+    block = np.array([lfsr_step(int(z), component) for z in z0], dtype=np.uint64)[:, None]
+    level = 0
+    while block.shape[1] < n and level < _MANY_LEVELS:
+        block = np.concatenate([block, maps[level].apply(block)], axis=1)
+        level += 1
+    out = np.empty((len(z0), n), dtype=np.uint64)
+    width = block.shape[1]
+    out[:, : min(n, width)] = block[:, :n]
+    if n > width and component not in _WIDE_MANY:
+        _WIDE_MANY[component] = maps[level].wide_tables()
+    for start in range(width, n, width):
+        block = _apply_wide(_WIDE_MANY[component], block)
+        end = min(start + width, n)
+        out[:, start:end] = block[:, : end - start]
+    return out
+
+
+class GrngStream:
+    """The samples of one or more GRNGs (same config and lanes, one seed each) a chunk at a
+    time: `next(n)` continues where the last chunk ended, so the chunks joined are exactly
+    `normals_raw` of their total length for each seed."""
+
+    def __init__(self, model: GrngModel, seed: int | None | list[int | None] = None):
+        self.model = model
+        seeds = seed if isinstance(seed, list) else [seed]
+        self.single = not isinstance(seed, list)
+        states = [model.reset_state() if s is None else model.loaded_state(s) for s in seeds]
+        # (generators x lanes, components) current states
+        self.state = np.array(states, dtype=np.uint64).reshape(-1, COMPONENTS)
+
+    def next(self, n: int) -> np.ndarray:
+        """(n, lanes) raw samples, or (generators, n, lanes) for a list of seeds."""
+        words = np.zeros((len(self.state), n), dtype=np.uint64)
+        for component in range(COMPONENTS):
+            states = component_states_many(self.state[:, component], component, n)
+            words ^= states
+            if n:
+                self.state[:, component] = states[:, -1]
+        lanes = self.model.lanes
+        out = self.model.from_uniforms(words.reshape(len(self.state) // lanes, lanes, n).transpose(0, 2, 1))
+        return out[0] if self.single else out
+
+
 def _quantised_quadratic(nodes: list[float], values: list[float], frac: int) -> list[int]:
     """Quadratic through three (Chebyshev) points, coefficients rounded to `frac` bits.
 
@@ -313,11 +365,9 @@ def _signed_width(v: int) -> int:
 
 
 def _bit_length(m: np.ndarray) -> np.ndarray:
-    """Exact bit length of uint64 values (0 for 0), by binary search on shifts."""
-    m = m.copy()
-    length = np.zeros(m.shape, dtype=np.int64)
-    for step in (32, 16, 8, 4, 2, 1):
-        big = m >= np.uint64(1 << step)
-        length += np.where(big, step, 0)
-        m = np.where(big, m >> np.uint64(step), m)
-    return length + (m > 0)
+    """Exact bit length of uint64 values below 2^63 (0 for 0): the float's exponent, one less
+    where rounding to 53 bits carried into the next power of two."""
+    _, exp = np.frexp(m.astype(np.float64))
+    exp = exp.astype(np.int64)
+    carried = (exp > 0) & ((m >> np.maximum(exp - 1, 0).astype(np.uint64)) == 0)
+    return exp - carried

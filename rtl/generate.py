@@ -19,9 +19,9 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
-from gpf.model.blocks import _OMEGA_Q, _ROT, cov_pairs, product_guard
+from gpf.model.blocks import _OMEGA_Q, _ROT, cov_pairs, product_guard, reach_top
 from gpf.model.fixed import Format
-from gpf.model.formats import CONST_WIDTH, INV_GUARD, datapath
+from gpf.model.formats import CONST_WIDTH, INV_GUARD, SHIFT_BITS, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip
 from gpf.rtl.filter import filter_context
@@ -586,10 +586,22 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
         "whiten_shift": whiten_shift, "u_width": u.width, "u_fmt": str(u),
         "sq_width": sq_width, "sum_width": sq_width + (terms - 1).bit_length() + 1,
         "t_shift": t_shift, "t_width": t.width, "t_fmt": str(t), "t_max": t.max_raw,
-        "w_width": dp.weight.width, "w_fmt": str(dp.weight),
-        # stages after the innovation d: product, u, squares, t; then the exp lane
-        "tail_latency": 4 + ex["latency"],
+        "t_frac": t.frac_bits, "w_width": dp.weight.width, "w_fmt": str(dp.weight),
+        # stages after the innovation d: product, u, squares, t
+        "tail_latency": 4,
+        # the block's relative weights: stage M (running minimum), then the exp lanes
+        "reach_top": reach_top(dp), "shift_width": SHIFT_BITS,
+        "shift_max": (1 << SHIFT_BITS) - 1, "exp_latency": ex["latency"],
     }
+
+
+def _weight_block(cfg: Config, lane: dict[str, Any], lane_latency: int) -> dict[str, Any]:
+    """A weight block's context: its lanes' (up to t), stage M and the exp lanes."""
+    dp = datapath(cfg)
+    lane_w = dp.n * dp.word + dp.weight.width + 1
+    return {**lane, "lanes": cfg.lanes, "components": dp.n, "lane_latency": lane_latency,
+            "latency": lane_latency + 1 + lane["exp_latency"],
+            "out_width": cfg.lanes * lane_w + SHIFT_BITS}
 
 
 def weight_bot_context(cfg: Config) -> dict[str, Any]:
@@ -604,8 +616,8 @@ def weight_bot_context(cfg: Config) -> dict[str, Any]:
         raise ValueError("weight_bot: bearings must be one datapath word")
     k = _whiten_context(cfg, [dp.angle_frac])
     z_delay = 1 + cordic["latency"]   # z meets the CORDIC's angle in stage A
-    return {**k, "lanes": cfg.lanes, "angle_width": dp.angle_frac, "components": dp.n,
-            "z_delay": z_delay, "latency": z_delay + 1 + k["tail_latency"]}
+    return {**_weight_block(cfg, k, z_delay + 1 + k["tail_latency"]),
+            "angle_width": dp.angle_frac, "z_delay": z_delay}
 
 
 def weight_uav_context(cfg: Config) -> dict[str, Any]:
@@ -616,8 +628,7 @@ def weight_uav_context(cfg: Config) -> dict[str, Any]:
     if dp.app != "uav" or len(set(vel)) != 1:
         raise ValueError("weight_uav: needs the uav state with one velocity format")
     k = _whiten_context(cfg, [f.frac_bits for f in vel])
-    return {**k, "lanes": cfg.lanes, "components": dp.n, "v_first": 4,
-            "latency": 1 + k["tail_latency"]}
+    return {**_weight_block(cfg, k, 1 + k["tail_latency"]), "v_first": 4}
 
 
 def cholesky_pairs(cfg: Config) -> list[tuple[int, int]]:

@@ -20,21 +20,27 @@ class Field:
     fmt: Format
 
 
-def unpack(words: list[int], fields: list[Field], lanes: int) -> dict[str, np.ndarray]:
-    """Split stream words into raw field values: (beats, lanes) int64 per field.
+def unpack(words: list[int], fields: list[Field], lanes: int,
+           beat_fields: list[Field] | tuple[Field, ...] = ()) -> dict[str, np.ndarray]:
+    """Split stream words into raw field values: (beats, lanes) int64 per field, and (beats, 1)
+    per beat field.
 
-    Fields are packed LSB first within a lane; lanes are concatenated, lane 0 lowest. Vectorised
-    (the words as a bit matrix): the scoreboard must not set the pace of long runs.
+    Fields are packed LSB first within a lane; lanes are concatenated, lane 0 lowest; a beat's
+    own fields (one per beat, not per lane) follow the last lane. Vectorised (the words as a bit
+    matrix): the scoreboard must not set the pace of long runs.
     """
     lane_w = sum(f.fmt.width for f in fields)
-    nbytes = max(1, (lane_w * lanes + 7) // 8)
+    total = lane_w * lanes + sum(f.fmt.width for f in beat_fields)
+    nbytes = max(1, (total + 7) // 8)
     raw = np.frombuffer(b"".join(w.to_bytes(nbytes, "little") for w in words),
                         dtype=np.uint8).reshape(len(words), nbytes)
     bits = np.unpackbits(raw, axis=1, bitorder="little")
     out = {f.name: np.zeros((len(words), lanes), dtype=np.int64) for f in fields}
-    for lane in range(lanes):
-        offset = lane * lane_w
-        for f in fields:
+    out.update({f.name: np.zeros((len(words), 1), dtype=np.int64) for f in beat_fields})
+    groups = [(lane, lane * lane_w, fields) for lane in range(lanes)]
+    groups.append((0, lanes * lane_w, list(beat_fields)))
+    for lane, offset, group in groups:
+        for f in group:
             width = f.fmt.width
             assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
             weights = np.left_shift(np.int64(1), np.arange(width, dtype=np.int64))
@@ -46,8 +52,10 @@ def unpack(words: list[int], fields: list[Field], lanes: int) -> dict[str, np.nd
     return out
 
 
-def pack(fields: list[Field], values: dict[str, np.ndarray]) -> list[int]:
-    """Stream words from raw field values (beats, lanes): the inverse of unpack()."""
+def pack(fields: list[Field], values: dict[str, np.ndarray],
+         beat_fields: list[Field] | tuple[Field, ...] = ()) -> list[int]:
+    """Stream words from raw field values (beats, lanes) and beat fields (beats, 1): the inverse
+    of unpack()."""
     lane_w = sum(f.fmt.width for f in fields)
     beats, lanes = np.asarray(values[fields[0].name]).shape
     words = []
@@ -58,6 +66,10 @@ def pack(fields: list[Field], values: dict[str, np.ndarray]) -> list[int]:
             for f in fields:
                 word |= (int(values[f.name][beat, lane]) & ((1 << f.fmt.width) - 1)) << shift
                 shift += f.fmt.width
+        shift = lanes * lane_w
+        for f in beat_fields:
+            word |= (int(np.asarray(values[f.name])[beat, 0]) & ((1 << f.fmt.width) - 1)) << shift
+            shift += f.fmt.width
         words.append(word)
     return words
 

@@ -38,6 +38,8 @@ class StreamBlock:
     fields_op: list[Field] = field(default_factory=list)   # per-step operands on `op`
     reduces: bool = False  # one output beat (tlast set, one lane) per input step
     interval: int = 1      # clocks between input beats at full rate (serial blocks: more)
+    beat_in: list[Field] = field(default_factory=list)    # a beat's own fields, after its lanes
+    beat_out: list[Field] = field(default_factory=list)
 
 
 def idle_inputs(dut: SimHandleBase) -> None:
@@ -82,8 +84,8 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
     """Send every beat (and each step's operands, (steps,) per operand field), collect as many
     outputs as due (failing, not hanging, if they stop), score."""
     n = sum(lasts) if block.reduces else len(lasts)
-    beats = list(zip(pack(block.fields_in, inputs), lasts, _op_words(block, ops, lasts),
-                     strict=True))
+    beats = list(zip(pack(block.fields_in, inputs, block.beat_in), lasts,
+                     _op_words(block, ops, lasts), strict=True))
     mon_in = Source(dut, "s_axis", stall_in, b.rng(f"{tag}-valid"), beats,
                     op=dut.op if block.fields_op else None)
     mon_out = Sink(dut, "m_axis", stall_out, b.rng(f"{tag}-ready"))
@@ -96,12 +98,14 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
     await ClockCycles(dut.clk, 2 * block.latency + 2)   # nothing more may come out
     loop.stop()
     assert len(mon_out.beats) == n, f"{block.name}: {len(mon_out.beats)} beats out for {n} in"
-    seen = unpack([beat.data for beat in mon_in.beats], block.fields_in, block.lanes)
+    seen = unpack([beat.data for beat in mon_in.beats], block.fields_in, block.lanes,
+                  block.beat_in)
     lasts_in = [beat.last for beat in mon_in.beats]
     expected = block.model(with_operands(block, seen, lasts_in, ops))
-    sb = Scoreboard(block.name, block.fields_out, expect_mismatch=expect_mismatch)
+    sb = Scoreboard(block.name, block.fields_out + block.beat_out,
+                    expect_mismatch=expect_mismatch)
     sb.compare(expected, unpack([beat.data for beat in mon_out.beats], block.fields_out,
-                                1 if block.reduces else block.lanes))
+                                1 if block.reduces else block.lanes, block.beat_out))
     lasts_out = [beat.last for beat in mon_out.beats]
     if block.reduces:
         assert all(lasts_out), f"{block.name}: a step's result beat without tlast"

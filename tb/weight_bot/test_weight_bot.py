@@ -1,6 +1,7 @@
-"""cocotb testbench of `weight_bot` (w = 2^-t, t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2):
-every particle passed through, every weight and every sat flag against model.blocks.weight_bot,
-one call per step (the observer and the bearing z are per-step operands)."""
+"""cocotb testbench of `weight_bot` (w = 2^-(t - R), t = (wrap(z - atan2(py - oy, px - ox)) c_u)^2,
+R the step's running minimum of floor(t)): every particle passed through, every weight, every
+sat flag and every beat's shift against model.blocks.weight_bot, one call per step (the observer
+and the bearing z are per-step operands)."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from gpf.tb.streaming import (
 )
 from gpf.tb.weight_common import (
     SAT,
+    SHIFT,
     check_weights_span,
     run_steps,
     spread_lanes,
@@ -39,15 +41,16 @@ def block(b: Bench, dp: Datapath | None = None) -> StreamBlock:
     assert (k["word"], k["angle_width"], k["w_width"]) == (dp.word, dp.angle_frac,
                                                            dp.weight.width), k
 
-    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
-        return weight_bot(dp, rows, ops["z"], (ops["ox"], ops["oy"]), per_particle=True)
+    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return weight_bot(dp, rows, ops["z"], (ops["ox"], ops["oy"]), b.cfg.lanes,
+                          per_particle=True)
 
     xs = [Field(f"x{i}", dp.x[i]) for i in range(N)]
     return StreamBlock(
         "weight_bot", xs, xs + [Field("w", dp.weight), SAT], b.cfg.lanes,
         b.manifest["modules"]["weight_bot"]["latency"], step_model(fn, N, ["z", "ox", "oy"]),
         fields_op=[Field("z", turns(dp.angle_frac)), Field("ox", dp.x[0]),
-                   Field("oy", dp.x[2])])
+                   Field("oy", dp.x[2])], beat_out=[SHIFT])
 
 
 class Scenario:
@@ -151,15 +154,20 @@ def corner_steps(b: Bench) -> dict[str, tuple[np.ndarray, dict[str, int]]]:
             rng.integers(0, one, (16, 2)) // (1, 24) for s in (1, -1)] + [(ox - one, oy)]
     sc = Scenario(b)
     cloud_bearing = int(sc.bearing(np.array(10.0 * one - ox), np.array(5.0 * one - oy)))
+    # the innovation shrinks beat by beat (k sigma off the bearing z = 0, due east of the
+    # observer): each beat holds a new best; a beat's lanes carry equal particles
+    sigma = math.sqrt(b.cfg.app_params["bearing_var"])
+    closing = np.array([(ox + 4 * one, 7, oy + int(4 * one * math.tan(k * sigma)), -7)
+                        for k in (30, 20, 12, 6, 3, 1.5, 0)], dtype=np.int64)
     return {
         # theta exactly 0 (on the +x axis, or dx = dy = 0) and z = 0: w exactly 1
         "w_one_axis": (rows([(ox + k, oy) for k in ks] + [(ox, oy)]), {"z": 0, "ox": ox, "oy": oy}),
         # theta exactly 3/8 turn on the diagonal
         "w_one_diagonal": (rows([(ox - k, oy + k) for k in ks]),
                            {"z": 3 << (a - 3), "ox": ox, "oy": oy}),
-        # z opposite the cloud's bearing: every weight 0
-        "w_zero": (rows(cloud), {"z": int(sc.wrap(np.array(cloud_bearing + half))), "ox": ox,
-                                 "oy": oy}),
+        # z opposite the cloud's bearing: no particle within reach
+        "out_of_reach": (rows(cloud), {"z": int(sc.wrap(np.array(cloud_bearing + half))),
+                                       "ox": ox, "oy": oy}),
         # the observer at one end of the range, the particles at the other: dx, dy saturate
         "sat_low_observer": (rows([(hi, hi), (hi, 0), (0, hi), (hi - one, lo + one), (hi, lo)]),
                              {"z": 1 << (a - 3), "ox": lo, "oy": lo}),
@@ -171,13 +179,15 @@ def corner_steps(b: Bench) -> dict[str, tuple[np.ndarray, dict[str, int]]]:
         # extreme particles, the observer inside the range
         "extremes": (rows([(lo, lo), (hi, hi), (lo, hi), (hi, lo), (0, 0), (ox, lo), (lo, oy)]),
                      {"z": -half, "ox": ox, "oy": oy}),
+        "new_best": (np.repeat(closing[:, None], lanes, axis=1), {"z": 0, "ox": ox, "oy": oy}),
     }
 
 
 @cocotb.test()
 async def test_corners(dut: SimHandleBase) -> None:
-    """w exactly 1 (zero innovation), all weights 0 (z opposite the particles), dx/dy
-    saturation with the observer at either end, bearings across +-1/2 turn, extremes."""
+    """w exactly 1 (zero innovation), no particle within reach (z opposite the particles: every
+    weight in (1/2, 1], no rescale), dx/dy saturation with the observer at either end, bearings across
+    +-1/2 turn, extremes, and a new best particle on every beat (rescales)."""
     b = bench()
     blk, dp = block(b), datapath(b.cfg)
     steps = corner_steps(b)
@@ -190,7 +200,12 @@ async def test_corners(dut: SimHandleBase) -> None:
         start_beat += len(rows)
     for name in ("w_one_axis", "w_one_diagonal"):
         assert (parts[name]["w"] == one_w).all(), f"{name}: w not exactly 1: {parts[name]['w']}"
-    assert (parts["w_zero"]["w"] == 0).all(), "w_zero: a weight above 0"
+    w, shift = parts["out_of_reach"]["w"], parts["out_of_reach"]["shift"]
+    assert (w > one_w // 2).all(), "out_of_reach: a weight not in (1/2, 1]: not equal enough"
+    assert (shift == 0).all(), "out_of_reach: a rescale beyond reach"
+    new = parts["new_best"]
+    assert (new["shift"][1:] > 0).all(), f"new_best: a beat without a rescale: {new['shift']}"
+    assert (new["w"] > one_w // 2).all(), "new_best: the best so far below 1/2"
     for name in ("sat_low_observer", "sat_high_observer"):
         assert parts[name]["sat"].all(), f"{name}: not every particle saturates"
     for name in ("wrap_minus_half", "wrap_plus_half"):

@@ -1,6 +1,7 @@
-"""cocotb testbench of `weight_uav` (w = 2^-t, t = sum_k ((v_gps,k - v_k) c_u)^2): every
-particle passed through, every weight and every sat flag against model.blocks.weight_uav, one
-call per step (the GPS velocity is a per-step operand)."""
+"""cocotb testbench of `weight_uav` (w = 2^-(t - R), t = sum_k ((v_gps,k - v_k) c_u)^2, R the
+step's running minimum of floor(t)): every particle passed through, every weight, every sat flag
+and every beat's shift against model.blocks.weight_uav, one call per step (the GPS velocity is
+a per-step operand)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from gpf.tb.streaming import (
 )
 from gpf.tb.weight_common import (
     SAT,
+    SHIFT,
     check_weights_span,
     run_steps,
     spread_lanes,
@@ -39,15 +41,16 @@ def block(b: Bench, dp: Datapath | None = None) -> StreamBlock:
     k = b.manifest["modules"]["weight_uav"]["constants"]
     assert (k["word"], k["w_width"], k["terms"]) == (dp.word, dp.weight.width, 3), k
 
-    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    def fn(rows: np.ndarray, ops: dict[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return weight_uav(dp, rows, np.array([ops[name] for name in OPS], dtype=np.int64),
-                          per_particle=True)
+                          b.cfg.lanes, per_particle=True)
 
     xs = [Field(f"x{i}", dp.x[i]) for i in range(N)]
     return StreamBlock(
         "weight_uav", xs, xs + [Field("w", dp.weight), SAT], b.cfg.lanes,
         b.manifest["modules"]["weight_uav"]["latency"], step_model(fn, N, OPS),
-        fields_op=[Field(name, dp.x[i]) for name, i in zip(OPS, V, strict=True)])
+        fields_op=[Field(name, dp.x[i]) for name, i in zip(OPS, V, strict=True)],
+        beat_out=[SHIFT])
 
 
 class Scenario:
@@ -132,13 +135,17 @@ def corner_steps(b: Bench) -> dict[str, tuple[np.ndarray, dict[str, int]]]:
 
     rng = np.random.default_rng(b.rng("weight_uav-corners").getrandbits(32))
     cloud = [tuple(int(c) for c in gps + rng.normal(0, 0.05 * one, 3)) for _ in range(24)]
+    # the innovation shrinks beat by beat: each beat holds a new best (lane 0 of a beat sees
+    # the rows rotated, so the rows are kept in groups of `lanes` equal particles)
+    sigma = b.cfg.app_params["sigma_v"] * one
+    closing = [(gps[0] + int(k * sigma), gps[1], gps[2]) for k in (30, 20, 12, 6, 3, 1.5, 0)]
     return {
         # zero innovation: w exactly 1
         "w_one": (rows([gps] * 4), ops(gps)),
         "w_one_zero": (rows([(0, 0, 0)] * 3), ops((0, 0, 0))),
         "w_one_ends": (rows([(lo, hi, lo)] * 3), ops((lo, hi, lo))),
-        # the GPS fix 5 m/s from the cloud: every weight 0
-        "w_zero": (rows(cloud), ops(tuple(g + 5 * one for g in gps))),
+        # the GPS fix 5 m/s (250 sigma) from the cloud: no particle within reach
+        "out_of_reach": (rows(cloud), ops(tuple(g + 5 * one for g in gps))),
         # v_gps at one end of the range, the particles at the other: every difference saturates
         "sat_high_gps": (rows([(lo, lo, lo), (lo + one, lo, lo), (lo, lo, lo + 1)]),
                          ops((hi, hi, hi))),
@@ -146,13 +153,16 @@ def corner_steps(b: Bench) -> dict[str, tuple[np.ndarray, dict[str, int]]]:
         # vE alone saturates: hi - lo and hi - (-1) overflow, hi - 0 and hi - 1 do not
         "sat_one": (rows([(lo, 0, 0), (0, 5, 0), (-1, 0, 0), (1, 0, 0)]), ops((hi, 0, 0))),
         "cloud": (rows(cloud), ops(gps)),
+        "new_best": (np.repeat(np.array([quats[0] + v for v in closing], np.int64)[:, None],
+                               lanes, axis=1), ops(gps)),
     }
 
 
 @cocotb.test()
 async def test_corners(dut: SimHandleBase) -> None:
-    """w exactly 1 (zero innovation, also at the range's ends), all weights 0 (GPS far away),
-    every difference saturating either way, one saturating component, a cloud."""
+    """w exactly 1 (zero innovation, also at the range's ends), no particle within reach (GPS
+    far away: every weight in (1/2, 1], no rescale), every difference saturating either way, one
+    saturating component, a cloud, and a new best particle on every beat (rescales)."""
     b = bench()
     blk, dp = block(b), datapath(b.cfg)
     steps = corner_steps(b)
@@ -165,12 +175,17 @@ async def test_corners(dut: SimHandleBase) -> None:
     for name in ("w_one", "w_one_zero", "w_one_ends"):
         assert (parts[name]["w"] == one_w).all(), f"{name}: w not exactly 1"
         assert not parts[name]["sat"].any()
-    assert (parts["w_zero"]["w"] == 0).all(), "w_zero: a weight above 0"
+    for name in ("out_of_reach", "sat_high_gps", "sat_low_gps"):
+        w, shift = parts[name]["w"], parts[name]["shift"]
+        assert (w > one_w // 2).all(), f"{name}: a weight not in (1/2, 1] beyond reach"
+        assert (shift == 0).all(), f"{name}: a rescale beyond reach"
     for name in ("sat_high_gps", "sat_low_gps"):
         assert parts[name]["sat"].all(), f"{name}: not every particle saturates"
-        assert (parts[name]["w"] == 0).all()
     assert parts["sat_one"]["sat"].sum() == 2 * b.cfg.lanes, "sat_one: two of four saturate"
     assert ((parts["cloud"]["w"] > 0) & (parts["cloud"]["w"] < one_w)).any()
+    new = parts["new_best"]
+    assert (new["shift"][1:] > 0).all(), f"new_best: a beat without a rescale: {new['shift']}"
+    assert (new["w"] > one_w // 2).all(), "new_best: the best so far below 1/2"
 
 
 @cocotb.test()

@@ -1,0 +1,1 @@
+"""Studies of the models: Monte Carlo quality against float64, metrics, plots."""
