@@ -73,6 +73,10 @@ def _format_key(default: str | None = None) -> Key:
 
 ESS_MIN_DEFAULT = 0.0
 
+
+def _ess_fraction(v: int | float) -> bool:
+    return _finite(v) and (v == 0 or any(v == 2.0**-k for k in range(17)))
+
 SCHEMA: dict[str, dict[str, Key]] = {
     "filter": {
         "app": _choice("bot", "uav"),
@@ -80,10 +84,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "lanes": _choice(1, 2, 4),
         "steps": _int_range(1, 100_000),
         "dt": _positive_float(),
-        # effective sample size below which a step's weights count as degenerate: the next
-        # step then samples from the predicted covariance instead of the weighted one
-        "ess_min": Key((int, float), "a number in [0, 65536]",
-                       lambda v: _finite(v) and 0 <= v <= 65536, default=ESS_MIN_DEFAULT),
+        # a step whose effective sample size is below this fraction of N has degenerate
+        # weights: the next step samples from the predicted covariance, not the weighted one.
+        # A power of two (a shift of N in hardware), or 0: never.
+        "ess_min": Key((int, float), "0 or a power of two 2^-k, k = 0 .. 16 (a fraction of N)",
+                       _ess_fraction, default=ESS_MIN_DEFAULT),
     },
     "formats": {
         # bot: one format for the whole state [px, vx, py, vy]; uav: quaternion and velocity

@@ -85,17 +85,26 @@ def _progress(path: Path) -> tuple[int, int] | None:
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
     cycles = res["cycles_per_step"]
-    rmse = res["rmse"]
-    unit = "m" if "observer" in res["estimates"] else "deg"
     lines = [
         f"gpf run: {res['config']} on {res['sim']}, scenario {res['scenario']}, seed "
         f"{res['seed']}: {res['steps']} steps x {res['particles']} particles "
         f"({res['lanes']} lane(s))",
         f"  particles checked {res['particles_checked']} (conditioning, propagated, weight), "
         f"values checked {res['values_checked']}, mismatches {res['mismatches']}",
-        f"  RMSE ({unit}) rtl {rmse['rtl']:.6g}, fixed {rmse['fixed']:.6g}, float "
-        f"{rmse['float']:.6g}; rtl vs float64 (same draws) per step: max "
-        f"{max(res['quantisation_error']):.3g} {unit}",
+    ]
+    for name, m in res["metrics"].items():
+        lines.append(f"  {name} RMSE ({m['unit']}), all / last 20 %: " + ", ".join(
+            f"{k} {m['all'][k]:.4g} / {m['last20'][k]:.4g}" for k in ("rtl", "fixed", "float")))
+    if res["metrics"]:
+        lines.append(f"  lost track (last 20 % > 3 x float64): "
+                     f"{'YES' if res['lost_track'] else 'no'}; rtl vs float64 (same draws) per "
+                     f"step: max {max(res['quantisation_error']):.3g}")
+    ess = [e for e in res["ess"] if e is not None]
+    flagged = {f: sum(f in flags for flags in res["flags"]) for f in
+               ("sat", "zero_weights", "not_pd", "low_ess")}
+    lines += [
+        f"  effective sample size: mean {sum(ess) / len(ess):.1f}, min {min(ess):.1f}; steps "
+        "flagged: " + (", ".join(f"{k} {v}" for k, v in flagged.items() if v) or "none"),
         f"  cycles per step: min {min(cycles)}, max {max(cycles)} (N/LANES + "
         f"{max(cycles) - res['particles'] // res['lanes']})",
         f"  {res['particles_per_second']:.0f} particles checked/s ({res['wall_seconds']:.1f} s "
@@ -106,49 +115,17 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
-def plot(res: dict[str, Any], directory: Path) -> list[str]:
+def plot(res: dict[str, Any], cfg: Config, directory: Path) -> list[str]:
     """Truth against the RTL's, the fixed-point model's and the float64 model's estimates, and
-    the error per step."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    the errors (study.plots, as `gpf model run` draws them)."""
     import numpy as np
 
-    from gpf.model.study import error_per_step
+    from gpf.study.plots import plot_run
 
-    directory.mkdir(parents=True, exist_ok=True)
-    est = {k: np.array(v) for k, v in res["estimates"].items()}
-    app = "bot" if "observer" in est else "uav"
-    stem = f"{res['config']}_{res['sim']}"
-    files = []
-    fig, ax = plt.subplots(figsize=(7, 5))
-    if app == "bot":
-        ax.plot(est["truth"][:, 0], est["truth"][:, 2], "k-", label="truth")
-        for name, style in (("float", "b--"), ("fixed", "g-."), ("rtl", "r:")):
-            ax.plot(est[name][:, 0], est[name][:, 2], style, label=name)
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-    else:
-        t = np.arange(len(est["truth"]))
-        for i in range(4):
-            ax.plot(t, est["truth"][:, i], "k-", lw=1, label="truth" if i == 0 else None)
-            ax.plot(t, est["rtl"][:, i], "r:", label="rtl" if i == 0 else None)
-        ax.set_xlabel("step")
-        ax.set_ylabel("attitude quaternion")
-    ax.set_title(f"{res['config']}: {res['steps']} steps, N = {res['particles']} "
-                 f"({res['sim']})")
-    ax.legend()
-    files.append(str(directory / f"{stem}_estimate.png"))
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for name, style in (("float", "b-"), ("fixed", "g-."), ("rtl", "r:")):
-        ax.plot(error_per_step(app, est[name], est["truth"]), style, label=name)
-    ax.set_xlabel("step")
-    ax.set_ylabel("position error (m)" if app == "bot" else "attitude error (deg)")
-    ax.legend()
-    files.append(str(directory / f"{stem}_error.png"))
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
-    return files
+    est = {k: np.array([[np.nan] * len(res["estimates"]["float"][0]) if r is None else r
+                        for r in v]) for k, v in res["estimates"].items() if k != "observer"}
+    observer = res["estimates"].get("observer")
+    title = f"{res['config']} on {res['sim']}, N = {res['particles']}, {res['steps']} steps"
+    return plot_run(cfg.app, {k: est[k] for k in ("truth", "float", "fixed", "rtl")}, cfg.dt,
+                    title, directory, f"{res['config']}_{res['sim']}",
+                    None if observer is None else np.array(observer))

@@ -13,7 +13,7 @@ from gpf.config import load_config
 from gpf.model.fixed_gpf import FixedGPF, run
 from gpf.model.float_gpf import FloatGPF
 from gpf.model.grng import GrngModel
-from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS
+from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS
 
 
 def best_of(repeat: int, fn) -> float:

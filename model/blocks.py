@@ -378,17 +378,18 @@ def finalise(dp: Datapath, sums: Sums, ref: np.ndarray, pairs: list[tuple[int, i
     """mu = ref + S1/W; Sigma_ij = S2_ij/W - m_i m_j; ESS = W^2 / sum w^2 (exact divisions, one
     rounding each), per run. W > 0: the best particle's weight is at least 1/2.
 
-    m_i = S1_i / W carries CHOL_SHIFT extra fraction bits, so m_i m_j has Sigma's fraction.
-    Returns mu (R, n) state formats, Sigma (R, P) raw (fraction dp.cov_frac(i, j)), ESS (R,)
-    in dp.ess, flags (R,)."""
+    m_i = S1_i / W carries CHOL_SHIFT extra fraction bits, so m_i m_j has Sigma's fraction; mu
+    rounds S1/W once (rounding m_i again would bias it: half-up twice moves [k + 1/4, k + 1/2)
+    up, +1/4 LSB a step for s = 1, a drift the weakly observable tilt of the uav cannot undo).
+    Both come from one quotient in hardware. Returns mu (R, n) state formats, Sigma (R, P) raw
+    (fraction dp.cov_frac(i, j)), ESS (R,) in dp.ess, flags (R,)."""
     runs = len(sums.w)
     flags = np.zeros(runs, dtype=np.int64)
     m, mu = [], np.empty((runs, dp.n), dtype=np.int64)
     for i in range(dp.n):
         shift = dp.chol[i].frac_bits - dp.x[i].frac_bits
         m.append(div_round(sums.s1[:, i], sums.w, shift))            # fraction chol_i
-        half = (1 << shift) >> 1
-        value = ref[:, i].astype(object) + ((m[i] + half) >> shift)
+        value = ref[:, i].astype(object) + div_round(sums.s1[:, i], sums.w, 0)
         mu[:, i], f = _sat_obj(value, dp.x[i])
         flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
     sigma = np.empty((runs, len(pairs)), dtype=np.int64)
@@ -463,41 +464,63 @@ def cov_pairs(dp: Datapath, covariance: str) -> list[tuple[int, int]]:
     return pairs
 
 
-# ---- predicted covariance (ctrl) -------------------------------------------------------------
+# ---- predicted covariance (sigma_predict) ----------------------------------------------------
+Term = tuple[int | None, str | None]   # (source pair index or None, constant name or None)
+
+
+def prediction_terms(dp: Datapath, pairs: list[tuple[int, int]]) -> list[list[Term]]:
+    """F Sigma F^T + Q as terms per entry (pairs' order): (q, None) is Sigma_q itself, (q, c)
+    Sigma_q times the constant c, (None, c) the constant alone. bot: Phi = I + T E (E: position
+    <- velocity), so Sigma + T (E S + S E^T) + T^2 E S E^T, and Gamma Q Gamma^T per axis (q_pp,
+    q_pv, q_vv); uav: the identity and q_q, q_v on the diagonal."""
+    index = {pr: q for q, pr in enumerate(pairs)}
+
+    def at(a: int, b: int) -> int:
+        return index[(max(a, b), min(a, b))]
+
+    out = []
+    for i, j in pairs:
+        terms: list[Term] = [(at(i, j), None)]
+        if dp.app == "bot":
+            if i % 2 == 0:
+                terms.append((at(i + 1, j), "T"))
+            if j % 2 == 0:
+                terms.append((at(i, j + 1), "T"))
+            if i % 2 == 0 and j % 2 == 0:
+                terms.append((at(i + 1, j + 1), "T2"))
+            if i // 2 == j // 2:
+                terms.append((None, {(0, 0): "q_pp", (1, 0): "q_pv", (1, 1): "q_vv"}[
+                    (i % 2, j % 2)]))
+        elif i == j:
+            terms.append((None, "q_q" if i < 4 else "q_v"))
+        out.append(terms)
+    return out
+
+
+def term_frac(dp: Datapath, pairs: list[tuple[int, int]], term: Term) -> int:
+    """The fraction bits of a term's exact value."""
+    src, name = term
+    frac = 0 if src is None else dp.cov_frac(*pairs[src])
+    return frac + (0 if name is None else dp.consts[name].frac)
+
+
 def predicted_sigma(dp: Datapath, sigma: np.ndarray, pairs: list[tuple[int, int]]
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """F Sigma F^T + Q of R covariances (R, P) raw, the pairs' order, as float_blocks'
-    predicted_covariance: bot Phi (T and T2 = T^2 as constants) and Gamma Q Gamma^T (q_pp, q_pv,
-    q_vv per axis); uav the identity and q_q, q_v on the diagonal. Every entry one exact sum,
-    rounded half up once into its format and saturated (flag SAT). Returns (Sigma, flags)."""
-    index = {pr: q for q, pr in enumerate(pairs)}
-    c = dp.consts
-
-    def entry(a: int, b: int) -> tuple[np.ndarray, int]:
-        return _obj(sigma[:, index[(max(a, b), min(a, b))]]), dp.cov_frac(a, b)
-
+    """F Sigma F^T + Q (prediction_terms) of R covariances (R, P) raw, the pairs' order, as
+    float_blocks' predicted_covariance: every entry one exact sum, rounded half up once into its
+    format and saturated (flag SAT). Returns (Sigma, flags)."""
     out = np.empty_like(sigma, dtype=np.int64)
     flags = np.zeros(len(sigma), dtype=np.int64)
-    for q, (i, j) in enumerate(pairs):
-        terms = [entry(i, j)]
-        if dp.app == "bot":
-            # Phi = I + T E (E: position <- velocity): Sigma + T (E S + S E^T) + T^2 E S E^T
-            for cond, (a, b), k in ((i % 2 == 0, (i + 1, j), "T"), (j % 2 == 0, (i, j + 1), "T"),
-                                    (i % 2 == 0 and j % 2 == 0, (i + 1, j + 1), "T2")):
-                if cond:
-                    raw, frac = entry(a, b)
-                    terms.append((raw * c[k].raw, frac + c[k].frac))
-            if i // 2 == j // 2:
-                k = {(0, 0): "q_pp", (1, 0): "q_pv", (1, 1): "q_vv"}[(i % 2, j % 2)]
-                terms.append((_obj(np.full(len(sigma), c[k].raw)), c[k].frac))
-        elif i == j:
-            k = "q_q" if i < 4 else "q_v"
-            terms.append((_obj(np.full(len(sigma), c[k].raw)), c[k].frac))
-        top = max(f for _, f in terms)
-        total = sum(raw * (1 << (top - f)) for raw, f in terms)
-        shift = top - dp.cov_frac(i, j)
-        value = (total + ((1 << shift) >> 1)) >> shift
-        out[:, q], f = _sat_obj(value, dp.sigma(i, j))
+    for q, terms in enumerate(prediction_terms(dp, pairs)):
+        top = max(term_frac(dp, pairs, t) for t in terms)
+        total = _obj(np.zeros(len(sigma), dtype=np.int64))
+        for src, name in terms:
+            value = _obj(np.ones(len(sigma), np.int64) if src is None else sigma[:, src])
+            if name is not None:
+                value = value * dp.consts[name].raw
+            total = total + value * (1 << (top - term_frac(dp, pairs, (src, name))))
+        shift = top - dp.cov_frac(*pairs[q])
+        out[:, q], f = _sat_obj((total + ((1 << shift) >> 1)) >> shift, dp.sigma(*pairs[q]))
         flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
     return out, flags
 

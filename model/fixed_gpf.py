@@ -58,6 +58,7 @@ class FixedGPF:
                              f"lanes = {cfg.lanes}")
         self.covariance = covariance or cfg.app_params.get("covariance", "full")
         self.pairs = blocks.cov_pairs(self.dp, self.covariance)
+        self.ess_min = ess_threshold(self.dp, self.particles)
 
     # ---- draws -----------------------------------------------------------------------------
     def grng(self) -> GrngModel:
@@ -155,7 +156,7 @@ class FixedGPF:
         line = (m1 | m2 | m4).reshape(runs, count)
         flags = np.bitwise_or.reduce(line, axis=1) | m3 | mom.flags
         # degenerate weights: sample the next step from the predicted covariance instead
-        sigma, low = mom.sigma, mom.ess < dp.ess_min
+        sigma, low = mom.sigma, mom.ess < self.ess_min
         if np.any(low):
             pred, f = blocks.predicted_sigma(dp, sigma_prev, self.pairs)
             sigma = np.where(low[:, None], pred, sigma)
@@ -200,6 +201,14 @@ class FixedGPF:
 
     def to_real_ess(self, ess: Any) -> np.ndarray:
         return np.asarray(ess, dtype=float) / 2.0 ** self.dp.ess.frac_bits
+
+
+def ess_threshold(dp: Datapath, particles: int) -> int:
+    """The raw ESS below which a step of N particles counts as degenerate: (N << ESS_FRAC) >>
+    ess_shift, what ctrl computes from the run-time N (0: never)."""
+    if dp.ess_shift is None:
+        return 0
+    return (particles << dp.ess.frac_bits) >> dp.ess_shift
 
 
 class DrawStream:

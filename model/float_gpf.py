@@ -138,7 +138,7 @@ class FloatGPF:
         """One filter step of R runs from (mu, L) (R, n), (R, n, n) with their inputs stacked
         (stack_inputs) and draws (R, N, D). sigma_prev (R, n, n): the covariance the step
         samples from (default L L^T); its prediction replaces the weighted covariance of a step
-        whose effective sample size is below cfg.ess_min (flag "low_ess")."""
+        whose effective sample size is below cfg.ess_min N (flag "low_ess")."""
         n, cfg = self.n, self.cfg
         draws = np.asarray(draws, dtype=float)
         if draws.ndim != 3 or draws.shape[2] != self.draws_per_particle:
@@ -158,7 +158,7 @@ class FloatGPF:
         w, out_of_reach = relative_weights(t)
         mu_k, sigma_k = moments(x, w, ref, self.app, self.covariance)
         ess = effective_sample_size(w)
-        low = ess < cfg.ess_min
+        low = ess < cfg.ess_min * x.shape[-2]      # a fraction of N
         if np.any(low):
             prev = L @ np.swapaxes(L, -1, -2) if sigma_prev is None else sigma_prev
             sigma_k = np.where(low[..., None, None], predicted_covariance(prev, cfg), sigma_k)

@@ -84,7 +84,7 @@ class Datapath:
     rot: Format | None = None     # entries of C(q)
     h_frac: int = 0               # uav: h = omega dt/2 kept in one word with these fraction bits
     ess: Format = Format(False, 12, ESS_FRAC)   # W^2 / sum w^2: up to the config's maximum N
-    ess_min: int = 0              # raw (ess format): below it a step's weights are degenerate
+    ess_shift: int | None = None  # ESS below N / 2^ess_shift: degenerate weights (None: never)
 
     @property
     def n(self) -> int:
@@ -147,7 +147,7 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
         }
         cordic = Cordic.for_widths(w, w)
         return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts, cordic,
-                        _exp2(t, weight), ess=_ess(cfg), ess_min=_ess_min(cfg))
+                        _exp2(t, weight), ess=_ess(cfg), ess_shift=_ess_shift(cfg))
     dt = cfg.dt
     consts = {
         "c_u": Const.of(math.sqrt(log2e / 2) / p["sigma_v"]),
@@ -166,13 +166,12 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
     h_frac = w - 1 - UAV_GYRO_INT_BITS - (math.floor(math.log2(dt / 2)) + 1)
     return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts,
                     None, _exp2(t, weight), gyro=gyro, accel=accel,
-                    rot=Format(True, 1, w - 2), h_frac=h_frac, ess=_ess(cfg), ess_min=_ess_min(cfg))
+                    rot=Format(True, 1, w - 2), h_frac=h_frac, ess=_ess(cfg), ess_shift=_ess_shift(cfg))
 
 
-def _ess_min(cfg: Config) -> int:
-    """cfg.ess_min in the ESS format, rounded half up (capped at its largest value)."""
-    fmt = _ess(cfg)
-    return min(math.floor(cfg.ess_min * 2**fmt.frac_bits + 0.5), fmt.max_raw)
+def _ess_shift(cfg: Config) -> int | None:
+    """filter.ess_min = 2^-k as k (None for 0: the rule is off)."""
+    return None if cfg.ess_min == 0 else round(-math.log2(cfg.ess_min))
 
 
 def _ess(cfg: Config) -> Format:
@@ -195,7 +194,7 @@ def constants(dp: Datapath) -> dict:
         "consts": {k: {"value": c.value, "raw": c.raw, "frac": c.frac}
                    for k, c in sorted(dp.consts.items())},
         "chol_floor_lsb": CHOL_FLOOR_LSB, "chol_floor_rel_bits": CHOL_FLOOR_REL_BITS,
-        "inv_guard": INV_GUARD, "ess": str(dp.ess), "ess_min": dp.ess_min,
+        "inv_guard": INV_GUARD, "ess": str(dp.ess), "ess_shift": dp.ess_shift,
         "exp2": dp.exp2.constants(),
     }
     if dp.cordic is not None:

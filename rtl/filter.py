@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from gpf.config import Config
-from gpf.model.formats import datapath
+from gpf.model.formats import SHIFT_BITS, datapath
 from gpf.model.grng import COMPONENTS
 
 CYCLES_W = 32          # the step's cycle count in the output beat
@@ -26,9 +26,10 @@ def filter_context(cfg: Config) -> dict[str, Any]:
     app, n, word, lanes = dp.app, dp.n, dp.word, cfg.lanes
     ctx = {name: MODULES[name].context(cfg)
            for name in ("sample_cond", f"propagate_{app}", f"weight_{app}", "moments",
-                        "cholesky")}
-    sc, prop, mom, chol = (ctx[k] for k in ("sample_cond", f"propagate_{app}", "moments",
-                                            "cholesky"))
+                        "cholesky", "sigma_predict")}
+    sc, prop, wt, mom, chol, pred = (ctx[k] for k in (
+        "sample_cond", f"propagate_{app}", f"weight_{app}", "moments", "cholesky",
+        "sigma_predict"))
     draws = dp.draws()
     mu_w, l_w = n * word, n * (n + 1) // 2 * word
     sig_w = chol["in_width"]
@@ -44,9 +45,15 @@ def filter_context(cfg: Config) -> dict[str, Any]:
         "sample_cond x = the state": sc["x_width"] == mu_w,
         "propagate in = {draws, x}": prop["in_width"] == mu_w + pe_w,
         "propagate out = {sat, x}": prop["out_width"] == prop_lane_w,
-        "moments in = {w, x}": mom["lane_w"] == part_lane_w - 1,
-        "moments out = {flags, Sigma, mu}": mom["out_w"] == mu_w + sig_w + 3,
+        "weight out = {shift, lanes {sat, w, x}}": wt["out_width"] == lanes * part_lane_w
+        + SHIFT_BITS,
+        "moments in = {shift, lanes {w, x}}": mom["in_w"] == lanes * (part_lane_w - 1)
+        + SHIFT_BITS,
+        "moments out = {ESS, flags, Sigma, mu}": mom["out_w"] == mu_w + sig_w + 3
+        + dp.ess.width,
         "cholesky out = {flags, L}": chol["out_width"] == l_w + 3,
+        "sigma_predict = {flags, Sigma}": pred["in_width"] == sig_w
+        and pred["out_width"] == sig_w + 3,
         "FIFO covers sample_cond": sc["latency"] + 1 <= 1 << FIFO_DEPTH_LOG2,
     }
     broken = [name for name, ok in checks.items() if not ok]
@@ -62,7 +69,10 @@ def filter_context(cfg: Config) -> dict[str, Any]:
         "mom_w": mom["out_w"], "chol_w": chol["out_width"],
         "init_w": pw + mu_w + sig_w, "step_w": len(STEP_FIELDS[app]) * word,
         "step_fields": STEP_FIELDS[app], "prop_op_w": prop_op_w, "weight_op_w": weight_op_w,
-        "est_w": mu_w + sig_w + l_w + 6 + CYCLES_W, "cycles_w": CYCLES_W,
+        "est_w": mu_w + sig_w + l_w + 8 + CYCLES_W + dp.ess.width, "cycles_w": CYCLES_W,
+        "ess_w": dp.ess.width, "ess_fmt": str(dp.ess), "ess_shift": dp.ess_shift,
+        "ess_frac": dp.ess.frac_bits, "shift_w": SHIFT_BITS,
+        "part_w": lanes * part_lane_w + SHIFT_BITS,
         "cond_lane_w": cond_lane_w, "prop_lane_w": prop_lane_w, "part_lane_w": part_lane_w,
         "propagate": f"propagate_{app}", "weight": f"weight_{app}",
         "ref_lane": f"propagate_{app}_lane", "ref_out": "x_out" if app == "bot" else "y",

@@ -19,7 +19,15 @@ import jinja2
 
 from gpf.config import Config
 from gpf.model import grng as grng_model
-from gpf.model.blocks import _OMEGA_Q, _ROT, cov_pairs, product_guard, reach_top
+from gpf.model.blocks import (
+    _OMEGA_Q,
+    _ROT,
+    cov_pairs,
+    prediction_terms,
+    product_guard,
+    reach_top,
+    term_frac,
+)
 from gpf.model.fixed import Format
 from gpf.model.formats import CONST_WIDTH, INV_GUARD, SHIFT_BITS, datapath
 from gpf.model.formats import constants as datapath_constants
@@ -509,10 +517,14 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     ws_w = (nmax * wmax).bit_length()                 # unsigned sum of weights
     s1_w = _sbits(nmax * wmax * -xmin)
     s2_w = _sbits(nmax * p_max * -xmin)
+    wws_w = (nmax * wmax * wmax).bit_length()        # unsigned sum of squared weights
     mean = []
     for i in range(n):
+        # q_i = floor(S1_i 2^(s+1) / W): a plain floor division by W (not 2W), offset 2^(QB-1)
         s = dp.chol[i].frac_bits - dp.x[i].frac_bits
-        mean.append(_div_params(s1_w, ws_w, s, (1 << (word - 1 + s)) + 1))
+        qb = _sbits((1 << (word + s)) + 2)
+        mean.append({"num_w": s1_w, "den_w": ws_w, "shift": s, "qb": qb, "dw": ws_w,
+                     "nnw": ws_w + qb})
     sig = []
     for i, j in pairs:
         s = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits - dp.x[j].frac_bits
@@ -525,9 +537,17 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         d.update(i=i, j=j, mm_w=mm_w, v_w=max(d["qb"], mm_w) + 1,
                  out_w=dp.sigma(i, j).width, fmt=str(dp.sigma(i, j)))
         sig.append(d)
+    # ESS = div_round(W^2, sum w^2, F) <= N (Cauchy-Schwarz; the rescales' roundings add far
+    # less than the format's extra integer bit): W^2 two bits a clock, then a divider
+    sq_steps = -(-ws_w // 2)
+    ess = _div_params(2 * ws_w, wws_w, dp.ess.frac_bits, dp.ess.max_raw)
+    ess["qb"] = dp.ess.width                          # unsigned: the quotient is the field
+    ess["nnw"] = ess["dw"] + ess["qb"]
+    t_ess_div = sq_steps + 1
+    t_ess = t_ess_div + 1 + ess["qb"]
     t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
     t_sig = 1 + max(d["qb"] for d in sig)
-    t_load = max(t_sig, t_mean + 1)
+    t_load = max(t_sig, t_mean + 1, t_ess)
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
         fq = dp.x[0].frac_bits
@@ -546,8 +566,11 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     ctx.update({
         "lanes": cfg.lanes, "n": n, "word": word, "ww": dp.weight.width,
         "x_fmts": [str(f) for f in dp.x], "w_fmt": str(dp.weight),
-        "lane_w": n * word + dp.weight.width, "opw": n * word,
-        "out_w": n * word + sum(d["out_w"] for d in sig) + 3,
+        "lane_w": n * word + dp.weight.width, "opw": n * word, "shw": SHIFT_BITS,
+        "in_w": cfg.lanes * (n * word + dp.weight.width) + SHIFT_BITS,
+        "out_w": n * word + sum(d["out_w"] for d in sig) + 3 + dp.ess.width,
+        "wws_w": wws_w, "ess": ess, "ess_frac": dp.ess.frac_bits, "ess_fmt": str(dp.ess),
+        "sq_steps": sq_steps, "t_ess_div": t_ess_div, "t_ess": t_ess,
         "pairs": [[i, j] for i, j in pairs], "npairs": len(pairs),
         "guard": guard, "k": k, "wdx_w": wdx_w, "p_w": p_w, "prod_w": prod_w,
         "ws_w": ws_w, "s1_w": s1_w, "s2_w": s2_w, "mean": mean, "sig": sig,
@@ -693,6 +716,44 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def sigma_predict_context(cfg: Config) -> dict[str, Any]:
+    """The predicted covariance F Sigma F^T + Q (model: blocks.predicted_sigma) as a program of
+    terms (blocks.prediction_terms), one a clock through one multiplier: every term's exact
+    value brought to the largest fraction of any term, summed per entry, rounded once."""
+    dp = datapath(cfg)
+    pairs = cholesky_pairs(cfg)
+    program = prediction_terms(dp, pairs)
+    top = max(term_frac(dp, pairs, t) for terms in program for t in terms)
+    sigma_w = [dp.sigma(i, j).width for i, j in pairs]
+    sw = max(sigma_w)
+    terms, ends = [], []
+    for q, entry in enumerate(program):
+        for k, (src, name) in enumerate(entry):
+            coef = dp.consts[name].raw if name is not None else 1
+            terms.append({"src": src, "coef": f"{_twos(coef, CONST_WIDTH):X}",
+                          "lsh": top - term_frac(dp, pairs, (src, name)), "first": k == 0,
+                          "last": k == len(entry) - 1, "dest": q})
+            ends.append((sw if src is not None else 2) + CONST_WIDTH
+                        + top - term_frac(dp, pairs, (src, name)))
+    acc_w = max(ends) + max(len(e) for e in program).bit_length() + 1
+    offs = [sum(sigma_w[:q]) for q in range(len(pairs))]
+    entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j),
+                "half": (1 << (top - dp.cov_frac(i, j))) >> 1}
+               for (i, j), o, w in zip(pairs, offs, sigma_w, strict=True)]
+    inputs = [{"off": o, "w": w} for o, w in zip(offs, sigma_w, strict=True)]
+    return {
+        "lanes": cfg.lanes, "npairs": len(pairs), "in_width": sum(sigma_w),
+        "out_width": sum(sigma_w) + 3, "sw": sw, "cw": CONST_WIDTH, "acc_w": acc_w,
+        "top": top, "terms": terms, "entries": entries, "inputs": inputs,
+        "kw": max(1, (len(terms) - 1).bit_length()),
+        "shift_w": max(1, max(t["lsh"] for t in terms).bit_length()),
+        "dest_w": max(1, (len(pairs) - 1).bit_length()),
+        # the beat, every term through stages A and B, the last rounding, the output register
+        "latency": len(terms) + 3, "interval": len(terms) + 4,
+        "covariance": cfg.app_params.get("covariance", "full"),
+    }
+
+
 def _table_ends(depth: int, offset_bits: int) -> tuple[Any, Any]:
     import numpy as np
 
@@ -720,6 +781,8 @@ MODULES: dict[str, Module] = {
                          uses=("exp",), apps=("uav",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
     "cholesky": Module("cholesky", ("cholesky",), cholesky_context, laned=False),
+    "sigma_predict": Module("sigma_predict", ("sigma_predict",), sigma_predict_context,
+                            laned=False),
     "cordic_atan2": Module("cordic_atan2", ("cordic_atan2_lane", "cordic_atan2"),
                            cordic_atan2_context),
     "exp": Module("exp", ("exp_lane", "exp"), exp_context),
@@ -729,7 +792,7 @@ MODULES: dict[str, Module] = {
     **{f"gpf_{app}": Module(
         f"gpf_{app}", ("gpf_grng", "gpf_fifo", "ctrl", f"gpf_{app}"), filter_context,
         uses=("grng",), apps=(app,), blocks=("sample_cond", f"propagate_{app}", f"weight_{app}",
-                             "moments", "cholesky"),
+                             "moments", "cholesky", "sigma_predict"),
         templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf")
        for app in ("bot", "uav")},
 }

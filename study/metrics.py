@@ -81,3 +81,43 @@ def last_window(steps: int) -> slice:
     """Rows k of the last 20 % of a run's steps 1..steps (at least one)."""
     count = max(1, round(steps * LAST_FRACTION))
     return slice(steps - count + 1, steps + 1)
+
+
+def primary_error(app: str, est: Array, truth: Array) -> Array:
+    """The application's primary error per row: bot position (m), uav tilt (deg)."""
+    return metric(app, PRIMARY[app]).error(est, truth)
+
+
+def rms(err: Array) -> float:
+    return float(np.sqrt(np.mean(np.asarray(err) ** 2)))
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """One run of several filters on the same draws (rows k = 0..steps)."""
+
+    rmse: dict[str, float | None]   # the primary metric over steps 1..steps, per filter
+    metrics: dict[str, dict]        # metric -> unit, and per window (all, last20) per filter
+    lost: bool                      # "rtl" (else "fixed") > LOST_FACTOR x "float", last 20 %
+    quantisation: list[float]       # primary error of the first filter against "float"
+
+
+def run_metrics(app: str, truth: Array, est: dict[str, Array]) -> RunReport:
+    """Every metric of every filter's estimates of one run; without truth (a recording) only
+    the quantisation error, the distance between the first filter and float64."""
+    names = list(est)
+    steps = len(truth) - 1
+    quantisation = primary_error(app, est[names[0]], est["float"])[1:].tolist()
+    if not np.all(np.isfinite(np.asarray(truth, float)[1:])):
+        return RunReport(dict.fromkeys(names), {}, False, quantisation)
+    windows = {"all": slice(1, None), "last20": last_window(steps)}
+    table: dict[str, dict] = {}
+    for m in METRICS[app]:
+        err = {name: m.error(e, truth) for name, e in est.items()}
+        table[m.name] = {"unit": m.unit, **{w: {name: rms(e[sl]) for name, e in err.items()}
+                                           for w, sl in windows.items()}}
+    judged = names[0]
+    lost = any(table[name]["last20"][judged] > LOST_FACTOR * table[name]["last20"]["float"]
+               for name in TRACKED[app])
+    return RunReport({name: table[PRIMARY[app]]["all"][name] for name in names}, table, lost,
+                     quantisation)

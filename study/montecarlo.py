@@ -142,8 +142,17 @@ class MonteCarlo:
                         "ratio_fixed_float": ratio, "ratio_std_error": _finite(noise),
                         "lost_tracks": len(self.lost_tracks()),
                         "lost_runs": self.lost_tracks(), "lost_factor": LOST_FACTOR})
+        if self.has_truth:
+            out["per_run_last20"] = self.per_run_last20()
         out["per_step"] = self.first_run()
         return out
+
+    def per_run_last20(self) -> dict[str, dict[str, list[float]]]:
+        """Each run's RMSE over its last 20 %, per tracked metric and filter (lost tracks are
+        judged on these)."""
+        last = last_window(self.steps)
+        return {name: {w: np.sqrt(self._mse(w, name, last)).round(6).tolist()
+                       for w in ("fixed", "float")} for name in TRACKED[self.app]}
 
     def first_run(self) -> dict[str, Any]:
         """Truth, estimates, flags and ESS of run 0, for plots and scripts."""

@@ -37,13 +37,13 @@ def _started(*args: Any, **kwargs: Any) -> None:
 @pytest.fixture
 def stubbed(monkeypatch: pytest.MonkeyPatch) -> None:
     import gpf.model.grng
-    import gpf.model.study
+    import gpf.study.montecarlo
     import gpf.rtl.generate
     import gpf.run
     import gpf.sim
 
     for module, name in ((gpf.sim, "run_sim"), (gpf.run, "run_filter"),
-                         (gpf.model.study, "monte_carlo"), (gpf.rtl.generate, "generate")):
+                         (gpf.study.montecarlo, "monte_carlo"), (gpf.rtl.generate, "generate")):
         monkeypatch.setattr(module, name, _started)
     monkeypatch.setattr(gpf.model.grng.GrngModel, "normals", _started)
 

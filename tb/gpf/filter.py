@@ -26,8 +26,10 @@ from gpf.model.fixed_gpf import FixedGPF, StepResult
 from gpf.model.float_gpf import FloatGPF
 from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
-from gpf.model.study import DEFAULT_SCENARIO, SCENARIOS, error_per_step, flag_names
+from gpf.model.formats import SHIFT_BITS
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
+from gpf.study.metrics import run_metrics
+from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
 from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
@@ -35,8 +37,9 @@ from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
 # every output port of gpf_<app>: defined (no X or Z) from reset on
 OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
     f"m_{tap}_{sig}" for tap in ("cond", "part") for sig in ("tvalid", "tdata", "tlast")]
-FLAGS = Format.parse("u3.0")
+FLAGS = Format.parse("u4.0")
 SAT = Format.parse("u1.0")
+SHIFT = Field("shift", Format(False, SHIFT_BITS, 0))
 
 
 @dataclass
@@ -61,7 +64,7 @@ class Streams:
     """Fields of every stream of gpf_<app> (LSB first, as ctrl and the top pack them)."""
 
     cond: list[Field]
-    part: list[Field]
+    part: list[Field]      # per lane; then the beat's shift (SHIFT)
     est: list[Field]
     init: list[Field]
     step: list[Field]
@@ -87,7 +90,8 @@ def streams(gpf: FixedGPF) -> Streams:
         cond=x + [Field("sat", SAT)],
         part=x + [Field("w", dp.weight), Field("sat", SAT)],
         est=mu + sig + chol + [Field("flags", FLAGS), Field("sticky", FLAGS),
-                               Field("cycles", Format(False, CYCLES_W, 0))],
+                               Field("cycles", Format(False, CYCLES_W, 0)),
+                               Field("ess", dp.ess)],
         init=[Field("particles", Format(False, gpf.cfg.particles.bit_length(), 0))] + mu + sig,
         step=step, pairs=gpf.pairs, lower=lower)
 
@@ -114,7 +118,8 @@ def expected_taps(res: StepResult, lanes: int) -> tuple[dict, dict]:
     cond = {f"x{i}": beats(t["cond"][:, i]) for i in range(n)} | {"sat": beats(t["cond_sat"])}
     part = {f"x{i}": beats(t["prop"][:, i]) for i in range(n)}
     # the tap shows weight's own sat; propagate's reach the step's flags only
-    part |= {"w": beats(t["weight"]), "sat": beats(t["weight_sat"])}
+    part |= {"w": beats(t["weight"]), "sat": beats(t["weight_sat"]),
+             "shift": np.asarray(t["shift"], dtype=np.int64)[:, None]}
     return cond, part
 
 
@@ -122,7 +127,7 @@ def expected_est(s: Streams, res: StepResult, sticky: int) -> dict[str, np.ndarr
     values = {f"mu{i}": int(v) for i, v in enumerate(res.mu)}
     values |= {f"s{i}_{j}": int(res.sigma[(i, j)]) for i, j in s.pairs}
     values |= {f"l{i}_{j}": int(res.chol[i, j]) for i, j in s.lower}
-    values |= {"flags": res.flags, "sticky": sticky}
+    values |= {"flags": res.flags, "sticky": sticky, "ess": res.ess}
     return {k: np.array([[v]], dtype=np.int64) for k, v in values.items()}
 
 
@@ -142,7 +147,10 @@ class RunResult:
     cycles_per_step: list[int] = field(default_factory=list)
     period_per_step: list[int] = field(default_factory=list)  # clocks between result beats
     flags: list[list[str]] = field(default_factory=list)
-    rmse: dict[str, float] = field(default_factory=dict)
+    ess: list[float] = field(default_factory=list)             # per step, as m_est reports it
+    rmse: dict[str, float] = field(default_factory=dict)       # the primary metric
+    metrics: dict[str, Any] = field(default_factory=dict)      # every metric, all and last 20 %
+    lost_track: bool = False       # the RTL's error over the last 20 % > 3 x float64's
     quantisation_error: list[float] = field(default_factory=list)  # rtl vs float64, per step
     estimates: dict[str, list] = field(default_factory=dict)
     wall_seconds: float = 0.0   # the simulation and its checks, the build excluded
@@ -171,7 +179,8 @@ class FilterBench:
         self.clock_running = clock_running   # another bench of this test started the clock
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
                                         expect_mismatch=corrupt)
-                       for name, fields in (("cond", self.s.cond), ("part", self.s.part),
+                       for name, fields in (("cond", self.s.cond),
+                                            ("part", self.s.part + [SHIFT]),
                                             ("est", self.s.est))}
 
     def idle(self) -> None:
@@ -272,13 +281,14 @@ class FilterBench:
                 raise AssertionError(f"step {k}: no result after {limit} clocks") from None
             exp_cond, exp_part = expected_taps(res, lanes)
             lo, hi = (k - 1) * beats, k * beats
-            for tap, exp, fields in (("cond", exp_cond, s.cond), ("part", exp_part, s.part)):
+            for tap, exp, fields, per_beat in (("cond", exp_cond, s.cond, []),
+                                               ("part", exp_part, s.part, [SHIFT])):
                 got = mons[tap][lo:hi]
                 assert len(got) == beats, f"step {k}: {len(got)} {tap} beats, expected {beats}"
                 lasts = [bt.last for bt in got]
                 assert lasts == [False] * (beats - 1) + [True], f"step {k}: {tap} tlast wrong"
-                self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes),
-                                         first_beat=lo)
+                self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes,
+                                                     per_beat), first_beat=lo)
             sticky |= res.flags
             est = unpack([mons["est"][k - 1].data], s.est, 1)
             exp_est = expected_est(s, res, sticky)
@@ -286,6 +296,7 @@ class FilterBench:
             self.boards["est"].compare(exp_est, est, first_beat=k - 1)
             res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
             res_out.flags.append(flag_names(int(est["flags"][0, 0])))
+            res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
             rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
                                                     for i in range(gpf.dp.n)])))
             mu, chol, sigma = res.mu, res.chol, res.sigma
@@ -307,8 +318,9 @@ class FilterBench:
         res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
                                        if b.first_mismatch), None)
         res_out.wall_seconds = round(time.monotonic() - began, 3)
-        res_out.rmse, res_out.quantisation_error, res_out.estimates = accuracy(
-            gpf, sc, draws, np.array(rtl_mu))
+        acc = accuracy(gpf, sc, draws, np.array(rtl_mu))
+        res_out.rmse, res_out.metrics, res_out.lost_track = acc.rmse, acc.metrics, acc.lost
+        res_out.quantisation_error, res_out.estimates = acc.quantisation, acc.estimates
         return res_out
 
     @property
@@ -316,24 +328,32 @@ class FilterBench:
         return sum(b.mismatched for b in self.boards.values())
 
 
-def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray
-             ) -> tuple[dict[str, float], list[float], dict[str, list]]:
-    """RMSE over steps k >= 1 of the RTL's, the fixed-point model's and the float64 model's
-    estimates (the float one driven by the same draws), the RTL's distance from the float64
-    estimate per step (its quantisation error: m for bot, degrees for uav), the estimates."""
+@dataclass
+class Accuracy:
+    rmse: dict[str, float | None]     # the primary metric of rtl, fixed and float64 (all steps)
+    metrics: dict[str, Any]           # study.metrics.run_metrics
+    lost: bool
+    quantisation: list[float]         # rtl vs float64 per step, primary metric
+    estimates: dict[str, list]
+
+
+def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray) -> Accuracy:
+    """The RTL's, the fixed-point model's and the float64 model's estimates (the float one
+    driven by the same draws): every metric's RMSE over all steps and the last 20 %, whether
+    the RTL lost track, its distance from the float64 estimate per step (its quantisation
+    error), the estimates."""
     from gpf.model.fixed_gpf import run
 
     fixed = run(gpf, sc, draws=draws)
     floating = FloatGPF(gpf.cfg, gpf.particles).run(sc, draws=gpf.dp.noise.to_real(draws))
-    app = gpf.dp.app
-    rmse = {name: float(math.sqrt(np.mean(error_per_step(app, est, sc.truth)[1:] ** 2)))
-            for name, est in (("float", floating.mu), ("fixed", fixed.mu), ("rtl", rtl_mu))}
-    quantisation = error_per_step(app, rtl_mu, floating.mu)[1:].tolist()
-    estimates = {"truth": sc.truth.tolist(), "float": floating.mu.tolist(),
-                 "fixed": fixed.mu.tolist(), "rtl": rtl_mu.tolist()}
-    if app == "bot":
-        estimates["observer"] = sc.inputs["observer"].tolist()
-    return rmse, quantisation, estimates
+    report = run_metrics(gpf.dp.app, sc.truth, {"rtl": rtl_mu, "fixed": fixed.mu,
+                                                "float": floating.mu})
+    estimates = {"truth": [None if not np.all(np.isfinite(r)) else r for r in sc.truth.tolist()],
+                 "float": floating.mu.tolist(), "fixed": fixed.mu.tolist(),
+                 "rtl": rtl_mu.tolist()}
+    if gpf.dp.app == "bot":
+        estimates["observer"] = sc.inputs["observer"][1:].tolist()
+    return Accuracy(report.rmse, report.metrics, report.lost, report.quantisation, estimates)
 
 
 def write_result(res: RunResult, path: str | None) -> None:

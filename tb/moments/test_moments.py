@@ -1,11 +1,15 @@
-"""cocotb testbench of `moments`: one result beat per step (mu, Sigma, flags) against the model's
-moments() (accumulate + finalise, + normalise_quaternion for uav), bit-exact.
+"""cocotb testbench of `moments`: one result beat per step (mu, Sigma, flags, ESS) against the
+model's moments() (accumulate with the rescales + finalise, + normalise_quaternion for uav),
+bit-exact.
 
-A step is built whole (its reference, its particles around it, its weights) so that particles are
-realistic: a spread around ref, weights 2^-t with t exponential, zeros now and then. The corner
-test adds the edges: all weights 0, one nonzero weight, all weights 1.0, x far from ref (dx
-saturates), 1-beat steps, a full step of cfg.particles particles with the extreme values that
-size the accumulators, Sigma near zero and (uav) tiny or zero quaternions."""
+A step is built whole (its reference, its particles around it, their exponents t) so that
+particles are realistic: a spread around ref, t exponential with a random scale; the weights and
+each beat's shift then come from the weight block's own model (relative_weights), as in the
+filter: relative to the best particle so far, rescaling the sums whenever a beat brings a new
+best. The corner test adds the edges: no particle within reach, one particle carrying the
+weight, all weights 1.0, a new best on every beat (and shifts that clear the sums), x far from
+ref (dx saturates), 1-beat steps, a full step of cfg.particles particles with the extreme values
+that size the accumulators, Sigma near zero and (uav) tiny or zero quaternions."""
 
 from __future__ import annotations
 
@@ -13,9 +17,9 @@ import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
 
-from gpf.model.blocks import accumulate, cov_pairs, moments
+from gpf.model.blocks import accumulate, cov_pairs, moments, reach_top, relative_weights
 from gpf.model.fixed import Format, saturate
-from gpf.model.formats import Datapath, datapath
+from gpf.model.formats import SHIFT_BITS, Datapath, datapath
 from gpf.model.primitives import div_round
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
@@ -29,6 +33,7 @@ from gpf.tb.streaming import (
 )
 
 FLAGS = Format(False, 3, 0)
+SHIFT = Field("shift", Format(False, SHIFT_BITS, 0))
 STALLS = [(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)]
 
 
@@ -41,21 +46,19 @@ def sigma_name(i: int, j: int) -> str:
 
 
 def step_particles(seen: dict[str, np.ndarray], rows: np.ndarray, n: int
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """x (N, n), w (N,) and ref (n,) of the beats `rows` (lanes flattened)."""
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """x (N, n), w (N,), shift (beats,) and ref (n,) of the beats `rows` (lanes flattened)."""
     x = np.stack([seen[f"x{i}"][rows].reshape(-1) for i in range(n)], axis=1)
     w = seen["w"][rows].reshape(-1)
     ref = np.array([seen[f"ref{i}"][rows][0] for i in range(n)], dtype=np.int64)
-    return x, w, ref
+    return x, w, seen["shift"][rows, 0], ref
 
 
-def without_mean_product(dp: Datapath, x: np.ndarray, w: np.ndarray, ref: np.ndarray,
-                         pairs: list[tuple[int, int]], sigma: dict) -> dict:
+def without_mean_product(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
+                         ref: np.ndarray, pairs: list[tuple[int, int]], sigma: dict) -> dict:
     """The corrupted model's Sigma: the second moment about ref, m_i m_j not subtracted."""
-    sums, _ = accumulate(dp, x, w, ref, pairs)
-    if sums.w == 0:
-        return sigma
-    m = [int(div_round(sums.s1[i], sums.w, dp.chol[i].frac_bits - dp.x[i].frac_bits))
+    sums, _ = accumulate(dp, x[None], w[None], shift[None], ref[None], pairs)
+    m = [int(div_round(sums.s1[0, i], sums.w[0], dp.chol[i].frac_bits - dp.x[i].frac_bits))
          for i in range(dp.n)]
     return {(i, j): int(saturate(v + m[i] * m[j], dp.sigma(i, j))[0])
             for (i, j), v in sigma.items()}
@@ -67,13 +70,13 @@ def moments_model(b: Bench, corrupt: bool = False):
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out: dict[str, list[int]] = {}
         for s in np.unique(seen[STEP]):
-            x, w, ref = step_particles(seen, seen[STEP] == s, dp.n)
-            mu, sigma, flags = moments(dp, x, w, ref, pairs)
+            x, w, shift, ref = step_particles(seen, seen[STEP] == s, dp.n)
+            mu, sigma, ess, flags = moments(dp, x, w, shift, ref, pairs)
             if corrupt:
-                sigma = without_mean_product(dp, x, w, ref, pairs, sigma)
+                sigma = without_mean_product(dp, x, w, shift, ref, pairs, sigma)
             values = {f"mu{i}": int(mu[i]) for i in range(dp.n)}
             values |= {sigma_name(i, j): int(sigma[(i, j)]) for i, j in pairs}
-            values["flags"] = int(flags)
+            values |= {"flags": int(flags), "ess": ess}
             for k, v in values.items():
                 out.setdefault(k, []).append(v)
         return {k: np.array(v, dtype=np.int64)[:, None] for k, v in out.items()}
@@ -87,10 +90,10 @@ def block(b: Bench, model=None) -> StreamBlock:
     fields_op = [Field(f"ref{i}", dp.x[i]) for i in range(dp.n)]
     fields_out = [Field(f"mu{i}", dp.x[i]) for i in range(dp.n)]
     fields_out += [Field(sigma_name(i, j), dp.sigma(i, j)) for i, j in pairs_of(b)]
-    fields_out += [Field("flags", FLAGS)]
+    fields_out += [Field("flags", FLAGS), Field("ess", dp.ess)]
     return StreamBlock("moments", fields_in, fields_out, b.cfg.lanes,
                        b.manifest["modules"]["moments"]["latency"], model or moments_model(b),
-                       fields_op=fields_op, reduces=True)
+                       fields_op=fields_op, reduces=True, beat_in=[SHIFT])
 
 
 # ---- stimulus: whole steps -------------------------------------------------------------------
@@ -104,21 +107,28 @@ class Steps:
         self.max_beats = b.cfg.particles // b.cfg.lanes   # a step holds at most N particles
         self.x: list[np.ndarray] = []
         self.w: list[np.ndarray] = []
+        self.shift: list[np.ndarray] = []
         self.refs: list[np.ndarray] = []
 
-    def add(self, x: np.ndarray, w: np.ndarray, ref: np.ndarray) -> None:
-        """x (beats, lanes, n), w (beats, lanes), ref (n,), clipped to their formats."""
-        assert 1 <= len(w) <= self.max_beats
-        lo = np.array([f.min_raw for f in self.dp.x])
-        hi = np.array([f.max_raw for f in self.dp.x])
+    def add(self, x: np.ndarray, t: np.ndarray, ref: np.ndarray) -> None:
+        """x (beats, lanes, n), the exponents t (beats, lanes) as reals (clipped to the t
+        format), ref (n,); the weights and shifts as the weight block makes them."""
+        assert 1 <= len(t) <= self.max_beats
+        dp = self.dp
+        lo = np.array([f.min_raw for f in dp.x])
+        hi = np.array([f.max_raw for f in dp.x])
+        raw_t = np.clip(np.floor(np.asarray(t, float) * 2**dp.t.frac_bits), 0, dp.t.max_raw)
+        w, shift = relative_weights(dp, raw_t.astype(np.int64).reshape(-1), self.lanes)
         self.x.append(np.clip(np.asarray(x, dtype=np.int64), lo, hi))
-        self.w.append(np.clip(np.asarray(w, dtype=np.int64), 0, self.dp.weight.max_raw))
+        self.w.append(w.reshape(len(t), self.lanes))
+        self.shift.append(shift)
         self.refs.append(np.clip(np.asarray(ref, dtype=np.int64), lo, hi))
 
     def inputs(self) -> dict[str, np.ndarray]:
         x = np.concatenate(self.x)
         out = {f"x{i}": x[:, :, i] for i in range(self.dp.n)}
         out["w"] = np.concatenate(self.w)
+        out["shift"] = np.concatenate(self.shift)[:, None]
         return out
 
     def lasts(self) -> list[bool]:
@@ -140,11 +150,12 @@ def realistic_ref(dp: Datapath, rng: np.random.Generator) -> np.ndarray:
     return ref
 
 
-def exp_weights(dp: Datapath, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
-    """w = 2^-t, t exponential with a random scale (peaked or flat sets of weights), some 0."""
-    t = rng.exponential(rng.uniform(0.3, 12.0), size=shape)
-    w = np.floor(2.0 ** (dp.weight.frac_bits - t) + 0.5).astype(np.int64)
-    return np.where(rng.random(shape) < rng.choice([0.0, 0.05, 0.5]), 0, w)
+def exponents(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """t exponential with a random scale (peaked or flat sets of weights), offset by a random
+    best (the weights are relative to it), some particles far away."""
+    t = rng.exponential(rng.uniform(0.3, 12.0), size=shape) + rng.choice([0.0, 3.0, 200.0])
+    return np.where(rng.random(shape) < rng.choice([0.0, 0.05, 0.5]), rng.uniform(
+        30, 1100, size=shape), t)
 
 
 def realistic_step(s: Steps, rng: np.random.Generator, beats: int) -> None:
@@ -155,7 +166,7 @@ def realistic_step(s: Steps, rng: np.random.Generator, beats: int) -> None:
     spread = 2.0 ** rng.uniform(1, dp.word - 4, size=dp.n)
     offset = np.where(rng.random(dp.n) < 0.3, rng.normal(size=dp.n) * spread * 4, 0)
     x = ref + offset + rng.normal(size=(beats, s.lanes, dp.n)) * spread
-    s.add(np.round(x), exp_weights(dp, rng, (beats, s.lanes)), ref)
+    s.add(np.round(x), exponents(rng, (beats, s.lanes)), ref)
 
 
 def step_lengths(rng: np.random.Generator, total: int, max_beats: int) -> list[int]:
@@ -181,7 +192,7 @@ def corner_steps(b: Bench) -> Steps:
     s = Steps(b)
     dp, lanes, n = s.dp, s.lanes, s.dp.n
     rng = np.random.default_rng(b.rng("moments-corners").getrandbits(32))
-    one = 1 << dp.weight.frac_bits
+    top = float(reach_top(dp))
     xmin = np.array([f.min_raw for f in dp.x])
     xmax = np.array([f.max_raw for f in dp.x])
 
@@ -190,38 +201,46 @@ def corner_steps(b: Bench) -> Steps:
         return np.round(ref + rng.normal(size=(beats, lanes, n)) * spread), ref
 
     x, ref = around(40)
-    s.add(x, np.zeros((40, lanes)), ref)                       # all weights 0
-    s.add(np.broadcast_to(xmin, (5, lanes, n)), np.zeros((5, lanes)), xmax)  # 0 and SAT
-    for w1 in (1, 7, one, dp.weight.max_raw):                  # a single nonzero weight
+    s.add(x, rng.uniform(top, top + 1, (40, lanes)), ref)       # no particle within reach
+    s.add(np.broadcast_to(xmin, (5, lanes, n)), np.full((5, lanes), 2 * top), xmax)  # and SAT
+    for t1 in (0.0, 0.99, 17.0, 300.0):                         # one particle carries the weight
         x, ref = around(30)
-        w = np.zeros((30, lanes), dtype=np.int64)
-        w[rng.integers(30), rng.integers(lanes)] = w1
-        s.add(x, w, ref)
+        t = np.full((30, lanes), t1 + 40.0)
+        t[rng.integers(30), rng.integers(lanes)] = t1
+        s.add(x, t, ref)
     x, ref = around(50, 3000.0)
-    s.add(x, np.full((50, lanes), one), ref)                   # all weights 1.0
+    s.add(x, np.zeros((50, lanes)), ref)                       # all weights 1.0
+    x, ref = around(60, 500.0)                                 # a new best on every beat
+    s.add(x, np.linspace(900, 0, 60)[:, None] + rng.uniform(0, 0.5, (60, lanes)), ref)
+    x, ref = around(40, 500.0)                                 # shifts of 1 .. 127 (capped)
+    s.add(x, np.repeat([1000.0, 990, 900, 800, 700, 573, 446, 319, 192, 64, 63, 62, 61, 60,
+                        59, 58, 50, 40, 30, 20], 2)[:, None] + np.zeros((1, lanes)), ref)
     x, ref = around(20, 3000.0)                                # far from ref: dx saturates
-    s.add(np.where(rng.random(x.shape) < 0.2, xmin, x), exp_weights(dp, rng, (20, lanes)),
+    s.add(np.where(rng.random(x.shape) < 0.2, xmin, x), exponents(rng, (20, lanes)),
           np.where(rng.random(n) < 0.5, xmax, xmin))
-    for w1 in (0, 1, one, dp.weight.max_raw):                  # 1-beat steps
+    for t1 in (0.0, 5.5, top + 0.5):                            # 1-beat steps
         x, ref = around(1, 1000.0)
-        s.add(x, np.full((1, lanes), w1), ref)
+        s.add(x, np.full((1, lanes), t1), ref)
     for c in (0, 1, -3):                                       # Sigma (near) zero
         x, ref = around(60)
         x = np.broadcast_to(ref + c, x.shape) + (rng.random(x.shape) < 0.05)
-        s.add(x, exp_weights(dp, rng, (60, lanes)), ref)
+        s.add(x, exponents(rng, (60, lanes)), ref)
     full = s.max_beats                                         # the accumulators' widths
-    wmax = np.full((full, lanes), dp.weight.max_raw)
-    s.add(np.broadcast_to(xmin, (full, lanes, n)), wmax, xmax)  # dx = min everywhere
+    ones = np.zeros((full, lanes))                             # w = 1.0, the largest
+    s.add(np.broadcast_to(xmin, (full, lanes, n)), ones, xmax)  # dx = min everywhere
     mixed = np.where(np.arange(n) % 2 == 0, xmin, xmax)         # dx_i dx_j most negative
-    s.add(np.broadcast_to(mixed, (full, lanes, n)), wmax, np.zeros(n))
-    s.add(np.broadcast_to(xmax, (full, lanes, n)), wmax, xmin)  # dx = max (saturated)
+    s.add(np.broadcast_to(mixed, (full, lanes, n)), ones, np.zeros(n))
+    s.add(np.broadcast_to(xmax, (full, lanes, n)), ones, xmin)  # dx = max (saturated)
+    late = np.full((full, lanes), 126.0)                        # full sums, then cleared
+    late[-1] = 0.0
+    s.add(np.broadcast_to(xmax, (full, lanes, n)), late, xmin)
     if dp.app == "uav":                                        # tiny and zero quaternions
         for q in ([0, 0, 0, 0], [1, 0, 0, 0], [1, 1, 1, 0], [-1, 1, -1, 1], [0, 0, 0, -3]):
             ref = realistic_ref(dp, rng)
             ref[:4] = q
             x = np.broadcast_to(ref, (3, lanes, n)).copy()
             x[..., 4:] += rng.integers(-50, 51, size=(3, lanes, n - 4))
-            s.add(x, exp_weights(dp, rng, (3, lanes)) | 1, ref)
+            s.add(x, exponents(rng, (3, lanes)), ref)
     for _ in range(10):
         realistic_step(s, rng, int(rng.integers(1, 80)))
     return s
@@ -252,7 +271,8 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
 
 @cocotb.test()
 async def test_corners(dut: SimHandleBase) -> None:
-    """The corner steps (corner_steps); ZERO_WEIGHTS and SAT must both really occur."""
+    """The corner steps (corner_steps); ZERO_WEIGHTS (no particle within reach) and SAT must both
+    really occur."""
     b = bench()
     s = corner_steps(b)
     blk = block(b)
