@@ -40,7 +40,7 @@ from gpf.model.float_blocks import (
 from gpf.model.scenarios import Scenario
 
 __all__ = [
-    "FLAGS", "GRAVITY", "NOT_PD", "ZERO_WEIGHTS", "BatchStep", "FloatGPF", "RunResult",
+    "FLAGS", "GRAVITY", "LOW_ESS", "NOT_PD", "ZERO_WEIGHTS", "BatchStep", "FloatGPF", "RunResult",
     "StepResult", "attitude_error_deg", "cholesky", "draw_count", "moments", "omega_matrix",
     "position_error", "position_rmse", "propagate_bot", "propagate_uav", "rotation_matrix",
     "sample_cond", "stack_inputs", "state_size", "weight_bot", "weight_uav", "wrap_angle",

@@ -16,6 +16,10 @@ from gpf.model.primitives import Cordic, Exp2Neg
 
 CONST_WIDTH = 18     # constants are one 18-bit DSP operand
 CHOL_SHIFT = 3       # L entries carry up to 3 more fraction bits than the state they scale
+CHOL_GUARD = 4       # and 4 bits more than a state word: L is one wide DSP48 operand (it only
+L_WIDTH_MAX = 25     # multiplies 18-bit draws), and the quaternion's rank-deficient covariance
+                     # (its norm direction) needs them: with L at the state's width, the
+                     # Cholesky's rounding residue left the fixed-point uav filter unlike float64
 INV_GUARD = 8        # extra fraction bits of 1/L_jj in the Cholesky
 CHOL_FLOOR_LSB = 16  # regularisation: a Cholesky pivot below (16 LSB of L)^2 or below
 CHOL_FLOOR_REL_BITS = 16  # 2^-16 of its diagonal entry is raised to that floor
@@ -69,7 +73,8 @@ class Datapath:
 
     app: str
     x: tuple[Format, ...]        # state components (particles, mu, ref, x - ref)
-    chol: tuple[Format, ...]     # row i of L scales state i: CHOL_SHIFT more fraction bits
+    chol: tuple[Format, ...]     # row i of L scales state i: CHOL_SHIFT + CHOL_GUARD more
+                                 # fraction bits, one width for all (a state word + CHOL_GUARD)
     noise: Format
     weight: Format
     angle_frac: int              # bot: bearings in turns, one turn = 2^W: a W-bit binary
@@ -127,7 +132,9 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
         x = tuple(with_word(fmt, word) for fmt in x)
         weight = with_word(weight, word)
     w = x[0].width
-    chol = tuple(shifted(fmt, min(CHOL_SHIFT, fmt.int_bits)) for fmt in x)
+    guard = max(0, min(CHOL_GUARD, L_WIDTH_MAX - w))
+    chol = tuple(Format(True, fmt.int_bits - k, fmt.frac_bits + k + guard)
+                 for fmt in x for k in [min(CHOL_SHIFT, fmt.int_bits)])
     u = Format(True, U_INT_BITS, w - 1 - U_INT_BITS)
     t = Format(False, T_INT_BITS, w - 8)           # W - 8 fraction bits, whatever the reach
     p = cfg.app_params

@@ -304,9 +304,9 @@ def _fault_step(steps: int) -> int:
 
 
 def bot_outlier(cfg: Any, steps: int, seed: int) -> Scenario:
-    """bot_fixed_observer with one bearing a quarter turn off at step FAULT_STEP: every
-    particle's weight underflows to 0 (flag ZERO_WEIGHTS, the prediction kept); the bearings
-    after it are normal again."""
+    """bot_fixed_observer with one bearing a quarter turn off at step FAULT_STEP: no particle
+    within the exponent's reach (flag ZERO_WEIGHTS: equal weights, the step a prediction); the
+    bearings after it are normal again."""
     sc = bot_fixed_observer(cfg, steps, seed)
     k = _fault_step(steps)
     sc.measurements["z"][k] = wrap_angle(sc.measurements["z"][k] + math.pi / 2)
@@ -314,9 +314,21 @@ def bot_outlier(cfg: Any, steps: int, seed: int) -> Scenario:
     return sc
 
 
+def bot_bearing_glitch(cfg: Any, steps: int, seed: int) -> Scenario:
+    """bot_fixed_observer with one bearing 10 sigma off at step FAULT_STEP: within the
+    exponent's reach, so a few particles take all the weight (LOW_ESS: the next step samples
+    from the predicted covariance, not the collapsed one); normal bearings follow."""
+    sc = bot_fixed_observer(cfg, steps, seed)
+    k = _fault_step(steps)
+    sc.measurements["z"][k] = wrap_angle(sc.measurements["z"][k]
+                                         + 10 * math.sqrt(cfg.app_params["bearing_var"]))
+    sc.meta.update(generator="bot_bearing_glitch", fault_step=k)
+    return sc
+
+
 def uav_gps_glitch(cfg: Any, steps: int, seed: int) -> Scenario:
-    """uav_flight with the GPS velocity 5 m/s off (250 sigma) at step FAULT_STEP: every weight
-    underflows (ZERO_WEIGHTS); normal fixes follow."""
+    """uav_flight with the GPS velocity 5 m/s off (250 sigma) at step FAULT_STEP: no particle
+    within reach (ZERO_WEIGHTS); normal fixes follow."""
     sc = uav_flight(cfg, steps, seed)
     k = _fault_step(steps)
     sc.measurements["v_gps"][k] += np.array([5.0, 0.0, 0.0])

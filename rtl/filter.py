@@ -31,7 +31,8 @@ def filter_context(cfg: Config) -> dict[str, Any]:
         "sample_cond", f"propagate_{app}", f"weight_{app}", "moments", "cholesky",
         "sigma_predict"))
     draws = dp.draws()
-    mu_w, l_w = n * word, n * (n + 1) // 2 * word
+    mu_w = n * word
+    l_w = sum(dp.chol[i].width for i in range(n) for _ in range(i + 1))
     sig_w = chol["in_width"]
     pe_w = (draws - n) * dp.noise.width
     prop_op_w = prop.get("op_width", 0)

@@ -680,10 +680,11 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS
 
     dp = datapath(cfg)
-    n, w, k = dp.n, dp.word, CHOL_DIGITS
+    n, k = dp.n, CHOL_DIGITS
     pairs = cholesky_pairs(cfg)
+    w = dp.chol[0].width                        # L's word
     if any(f.width != w or not f.signed for f in dp.chol):
-        raise ValueError("cholesky: every L format must be a signed state word")
+        raise ValueError("cholesky: every L format must be signed and one width")
     if CHOL_FLOOR_LSB < 16:
         raise ValueError("cholesky: the division starts from remainder 8 < L_jj")
     sigma_w = [dp.sigma(i, j).width for i, j in pairs]

@@ -31,6 +31,7 @@ SCENARIOS: dict[str, Callable[..., scenarios.Scenario]] = {
     "uav_flight": scenarios.uav_flight,
     # faults: flagged and survived
     "bot_outlier": scenarios.bot_outlier,
+    "bot_bearing_glitch": scenarios.bot_bearing_glitch,
     "uav_gps_glitch": scenarios.uav_gps_glitch,
     "bot_far_target": scenarios.bot_far_target,
 }

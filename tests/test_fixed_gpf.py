@@ -13,7 +13,8 @@ from gpf.config import load_config
 from gpf.model import blocks
 from gpf.model.blocks import Flag
 from gpf.model.fixed_gpf import FixedGPF, run
-from gpf.model.float_gpf import FloatGPF, propagate_uav, weight_bot
+from gpf.model.float_gpf import FloatGPF, propagate_uav
+from gpf.model.float_blocks import exponent_bot
 from gpf.model.formats import datapath
 from gpf.model.scenarios import bot_fixed_observer, uav_flight
 
@@ -83,41 +84,121 @@ def test_propagate_bot_is_exact() -> None:
             assert out[p, 2 * axis + 1] == frac_round(new_v * 2**fx)
 
 
-def test_weight_bot_close_to_float() -> None:
+def test_exponent_bot_close_to_float() -> None:
+    """t = d^2 log2(e) / 2R: the CORDIC's bearing and the roundings of u and t only."""
     gpf = FixedGPF(BOT, particles=256, word=WIDE)
     dp = gpf.dp
     rng = np.random.default_rng(3)
     xr = np.column_stack([rng.uniform(1, 3, 256), np.zeros(256), rng.uniform(2, 4, 256),
                           np.zeros(256)])
     x = np.array([[dp.x[i].from_real(v)[0] for i, v in enumerate(row)] for row in xr])
-    inputs = {"z": 1.15, "observer": (0.0, 0.0)}
-    w, _ = gpf.weight(x, gpf.quantise_inputs(inputs))
-    w_real = dp.weight.to_real(w)
-    w_float = weight_bot(dp_real_state(gpf, x), 1.15, np.zeros(2), BOT)
-    # CORDIC and 2^-x are approximations: a few weight LSB, plus the bearing's quantisation
-    assert np.max(np.abs(w_real - w_float)) < 2e-4
+    raw = gpf.quantise_inputs({"z": 1.15, "observer": (0.0, 0.0)})
+    t, _ = blocks.exponent_bot(dp, x, raw["z"], raw["observer"])
+    t_float = exponent_bot(dp_real_state(gpf, x), 1.15, np.zeros(2), BOT)
+    near = t_float < 40
+    assert np.abs(dp.t.to_real(t) - t_float)[near].max() < 2e-3 * (1 + t_float[near]).max()
 
 
-def dp_real_state(gpf: FixedGPF, x: np.ndarray) -> np.ndarray:
-    return np.column_stack([gpf.dp.x[i].to_real(x[:, i]) for i in range(x.shape[1])])
+def test_relative_weights() -> None:
+    """Every particle of beat b gets exactly 2^-(t - R_b), R_b the running minimum of floor(t)
+    over the beats; the step's best has w in (1/2, 1]; the shifts add up to R's fall."""
+    dp = datapath(BOT)
+    rng = np.random.default_rng(7)
+    for lanes in (1, 2, 4):
+        t = (rng.exponential(30, size=(5, 64)) * 2**dp.t.frac_bits).astype(np.int64)
+        w, shift = blocks.relative_weights(dp, t, lanes)
+        floor = (t >> dp.t.frac_bits).reshape(5, -1, lanes).min(axis=2)
+        running = np.minimum.accumulate(np.minimum(floor, blocks.reach_top(dp)), axis=1)
+        expect = dp.exp2(t - (np.repeat(running, lanes, axis=1) << dp.t.frac_bits))
+        assert np.array_equal(w, expect)
+        best = np.argmin(t, axis=1)
+        one = 1 << dp.weight.frac_bits
+        assert np.all(w[np.arange(5), best] > one // 2) and np.all(w <= one)
+        total = blocks.reach_top(dp) - running[:, -1]
+        assert np.all(np.minimum(shift, 127).sum(axis=1) >= np.minimum(total, 127))
+        assert np.all(shift[:, 1:] == np.minimum(running[:, :-1] - running[:, 1:], 127))
+
+
+def test_rescaled_sums_are_the_sequential_recurrence() -> None:
+    """acc <- round(acc 2^-shift scale) + beat, exactly as a loop over beats in Python ints."""
+    rng = np.random.default_rng(11)
+    for lanes in (1, 3):
+        values = rng.integers(-(1 << 61), 1 << 61, size=(4, 30 * lanes, 3))
+        shift = np.where(rng.random((4, 30)) < 0.3, rng.integers(0, 130, (4, 30)), 0)
+        scale = np.array([1, 2, 1])
+        got = blocks.rescaled_sums(values, shift, scale)
+        for r in range(4):
+            acc = [0, 0, 0]
+            for b in range(30):
+                beat = values[r, b * lanes:(b + 1) * lanes].astype(object).sum(axis=0)
+                for c in range(3):
+                    s_ = int(shift[r, b]) * int(scale[c]) if b else 0
+                    acc[c] = ((acc[c] + ((1 << s_) >> 1)) >> s_) + int(beat[c])
+            assert list(got[r]) == acc
 
 
 def test_moments_against_numpy() -> None:
+    """Weights relative to the best (with rescales): mean and covariance as numpy's weighted
+    ones of 2^-(t - min t), the ESS as Kish's."""
     gpf = FixedGPF(BOT, particles=2048)
     dp = gpf.dp
     rng = np.random.default_rng(4)
     xr = rng.normal([5, 1, 7, -1], [0.3, 0.1, 0.4, 0.05], size=(2048, 4))
     x = np.array([[dp.x[i].from_real(v)[0] for i, v in enumerate(row)] for row in xr])
-    w = np.array([dp.weight.from_real(v)[0] for v in rng.uniform(0, 1, 2048)])
+    t = (rng.exponential(6.0, size=2048) * 2**dp.t.frac_bits).astype(np.int64) + (40 << 10)
+    t[:300] = np.sort(t[:300])[::-1]                # the best so far improves now and then
+    w, shift = blocks.relative_weights(dp, t, 1)
+    assert np.count_nonzero(shift[1:]) > 2          # rescales happened
     ref = gpf.quantise_state([5.1, 0.9, 6.9, -1.0])
-    sums, flags = blocks.accumulate(dp, x, w, ref, gpf.pairs)
-    mu, sigma, f2 = blocks.finalise(dp, sums, ref, gpf.pairs)
-    assert flags == 0 and f2 == 0
-    x_real, w_real = dp_real_state(gpf, x), dp.weight.to_real(w)
+    mu, sigma, ess, flags = blocks.moments(dp, x, w, shift, ref, gpf.pairs)
+    assert flags == 0
+    x_real = dp_real_state(gpf, x)
+    w_real = np.exp2(-(dp.t.to_real(t) - dp.t.to_real(t).min()))
     mean = np.average(x_real, axis=0, weights=w_real)
     cov = np.cov(x_real.T, aweights=w_real, bias=True)
     assert np.allclose(gpf.to_real_mu(mu), mean, atol=2 * dp.x[0].lsb)
-    assert np.allclose(gpf.to_real_sigma(sigma), cov, atol=4 * dp.x[0].lsb * 0.5)
+    assert np.allclose(gpf.to_real_sigma(sigma), cov, rtol=2e-3, atol=4 * dp.x[0].lsb)
+    kish = w_real.sum() ** 2 / (w_real**2).sum()
+    assert abs(dp.ess.to_real(ess) - kish) < 0.01 * kish
+
+
+def test_mean_is_rounded_once() -> None:
+    """mu_i = ref_i + round(S1_i / W) exactly: no second rounding of the quotient that also
+    feeds Sigma (a double half-up rounding biases the mean by a quarter LSB a step)."""
+    dp = datapath(UAV)
+    pairs = blocks.cov_pairs(dp, "block")
+    rng = np.random.default_rng(12)
+    x = rng.integers(-3000, 3000, size=(1, 300, 7))
+    w = rng.integers(1, 1 << dp.weight.frac_bits, size=(1, 300))
+    ref = np.zeros((1, 7), dtype=np.int64)
+    sums, _ = blocks.accumulate(dp, x, w, np.zeros((1, 300), np.int64), ref, pairs)
+    mu, _, _, _ = blocks.finalise(dp, sums, ref, pairs)
+    for i in range(7):
+        exact = Fraction(int(sums.s1[0, i]), int(sums.w[0]))
+        assert mu[0, i] == frac_round(exact)
+
+
+def test_predicted_sigma_against_float() -> None:
+    """F Sigma F^T + Q of the model's constants within half an LSB (plus the constants'
+    quantisation) of float64's, for both applications."""
+    from gpf.model.float_blocks import predicted_covariance
+
+    rng = np.random.default_rng(13)
+    for cfg in (BOT, UAV):
+        dp = datapath(cfg)
+        pairs = blocks.cov_pairs(dp, cfg.app_params.get("covariance", "full"))
+        sig = random_spd(rng, dp.n, 0.05)
+        raw = np.array([[quantise_sigma(dp, sig, pairs)[p] for p in pairs]])
+        pred, flags = blocks.predicted_sigma(dp, raw, pairs)
+        exact = predicted_covariance(FixedGPF(cfg, 64).to_real_sigma(raw[0]), cfg)
+        for q, (i, j) in enumerate(pairs):
+            err = abs(pred[0, q] / 2.0 ** dp.cov_frac(i, j) - exact[i, j])
+            assert err * 2.0 ** dp.cov_frac(i, j) < 0.6, (cfg.name, i, j)
+        assert flags[0] == 0
+
+
+def dp_real_state(gpf: FixedGPF, x: np.ndarray) -> np.ndarray:
+    return np.column_stack([gpf.dp.x[i].to_real(x[:, i]) for i in range(x.shape[1])])
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -144,23 +225,79 @@ def test_cholesky_regularises_singular_with_flag() -> None:
     assert np.abs(real @ real.T - sigma).max() < 1e-4 * np.abs(sigma).max()
 
 
-def test_zero_weights_fall_back_with_flag() -> None:
+def test_out_of_reach_predicts_with_flag() -> None:
+    """The bearing points the other way: no particle within the exponent's reach. Every weight
+    is then in (1/2, 1] (the measurement ignored): mu is the cloud's own mean, near the
+    prediction, flag ZERO_WEIGHTS; the next step, with a sensible bearing, is normal again."""
     gpf = FixedGPF(BOT, particles=64)
     mu, chol = gpf.init(np.array([1.0, 0.3, 3.0, 0.3]), np.diag([0.01, 0.002, 0.01, 0.002]))
     sigma = quantise_sigma(gpf.dp, np.diag([0.01, 0.002, 0.01, 0.002]), gpf.pairs)
-    draws = gpf.draws(1, seed=3)[0]
-    # the bearing points the other way: every particle's weight underflows to exactly 0
+    draws = gpf.draws(2, seed=3)
     res = gpf.step(mu, chol, sigma, gpf.quantise_inputs({"z": -1.9, "observer": (0, 0)}),
-                   draws, keep_particles=True)
+                   draws[0], keep_particles=True)
+    one = 1 << gpf.dp.weight.frac_bits
     assert res.flags & Flag.ZERO_WEIGHTS
-    assert np.all(res.particles["weight"] == 0)
-    ref, _ = gpf.propagate(mu[None, :], np.zeros((1, 2), np.int64), {})
-    assert np.array_equal(res.mu, ref[0]) and np.array_equal(res.chol, chol)
-    # and the next step, with a sensible bearing, is normal again
+    assert np.all(res.particles["weight"] > one // 2) and np.all(res.particles["shift"] == 0)
+    assert gpf.dp.ess.to_real(res.ess) > 60
+    prop = gpf.to_real_mu(res.particles["prop"])
+    assert np.allclose(gpf.to_real_mu(res.mu), prop.mean(axis=0), atol=0.02)
     nxt = gpf.step(res.mu, res.chol, res.sigma,
                    gpf.quantise_inputs({"z": math.atan2(3.6, 1.6), "observer": (0, 0)}),
-                   gpf.draws(2, seed=3)[1])
+                   draws[1])
     assert not nxt.flags & Flag.ZERO_WEIGHTS
+
+
+def test_low_ess_samples_from_the_predicted_covariance() -> None:
+    """A step whose ESS is below N / 32 (a bearing 12 sigma off a tight cloud): its Sigma is
+    the prediction of the previous one, not the collapsed weighted one, flag LOW_ESS; with
+    the rule off (ess_min = 0) the weighted one stays."""
+    sig0 = np.diag([0.04, 0.01, 0.04, 0.01])
+    mu0 = np.array([1.0, 0.3, 3.0, 0.3])
+    z = math.atan2(3.3, 1.3) + 12 * math.sqrt(BOT.app_params["bearing_var"])
+    for cfg, expect_low in ((BOT, True), (load_config("configs/bot.toml",
+                                                      {"filter.ess_min": 0}), False)):
+        gpf = FixedGPF(cfg, particles=256)
+        mu, chol = gpf.init(mu0, sig0)
+        sigma = gpf.quantise_sigma(sig0)
+        res = gpf.step(mu, chol, sigma, gpf.quantise_inputs({"z": z, "observer": (0, 0)}),
+                       gpf.draws(1, seed=5)[0])
+        assert gpf.dp.ess.to_real(res.ess) < 256 / 32
+        prev = np.array([[sigma[p] for p in gpf.pairs]])
+        pred = dict(zip(gpf.pairs, blocks.predicted_sigma(gpf.dp, prev, gpf.pairs)[0][0],
+                        strict=True))
+        assert bool(res.flags & Flag.LOW_ESS) == expect_low
+        assert (res.sigma == {p: int(v) for p, v in pred.items()}) == expect_low
+
+
+def test_batch_step_is_the_single_steps() -> None:
+    """R runs stepped together give each run's own single steps, bit for bit."""
+    for cfg in (BOT, UAV):
+        gpf = FixedGPF(cfg, particles=64)
+        scs = [(bot_fixed_observer if cfg.app == "bot" else uav_flight)(cfg, 3, 20 + r)
+               for r in range(3)]
+        singles = [run(gpf, sc, seed=40 + r) for r, sc in enumerate(scs)]
+        flt = FloatGPF(cfg, 64)
+        states = [gpf.init(*flt.initial(sc)) for sc in scs]
+        mu = np.stack([m for m, _ in states])
+        chol = np.stack([c for _, c in states])
+        sigma = np.array([[gpf.quantise_sigma(flt.initial(sc)[1])[p] for p in gpf.pairs]
+                          for sc in scs])
+        for k in range(1, 4):
+            inputs = gpf.stack_inputs([gpf.quantise_inputs(sc.step_inputs(k)) for sc in scs])
+            res = gpf.step_batch(mu, chol, sigma, inputs,
+                                 np.stack([one.draws[k - 1] for one in singles]))
+            mu, chol, sigma = res.mu, res.chol, res.sigma
+            for r, one in enumerate(singles):
+                assert np.array_equal(gpf.to_real_mu(mu[r]), one.mu[k])
+                assert res.flags[r] == one.flags[k]
+
+
+def test_draw_stream_is_the_whole_draws() -> None:
+    gpf = FixedGPF(UAV, particles=32)
+    whole = gpf.draws(7, seed=9)
+    stream = gpf.draw_stream(9)
+    parts = np.concatenate([stream.next(3), stream.next(0), stream.next(4)])
+    assert np.array_equal(whole, parts)
 
 
 def test_propagate_uav_close_to_float() -> None:
@@ -174,7 +311,7 @@ def test_propagate_uav_close_to_float() -> None:
     e = rng.integers(-(1 << 15), 1 << 15, size=(128, 6))
     inputs = gpf.quantise_inputs({"omega": [0.1, -0.2, 0.3], "accel": [0.5, 0.2, 9.9],
                                   "v_gps": [10, 5, 1]})
-    out, flags = gpf.propagate(x, e, inputs)
+    out, flags = blocks.propagate_uav(dp, x, e, inputs["omega"], inputs["accel"])
     assert flags == 0
     omega = dp.gyro.to_real(inputs["omega"])
     accel = dp.accel.to_real(inputs["accel"])
@@ -223,16 +360,22 @@ def _line_rate_calls(rng: np.random.Generator) -> list:
         ("propagate_bot", lambda r, p: blocks.propagate_bot(bot, x_bot[r], e_bot[r, 4:], p)),
         ("propagate_uav", lambda r, p: blocks.propagate_uav(uav, x_uav[r], e_uav[r, :6], omega,
                                                             accel, p)),
-        ("weight_bot", lambda r, p: blocks.weight_bot(bot, x_bot[r], 1000, (int(mu[0]),
-                                                                             int(mu[2])), p)),
-        ("weight_uav", lambda r, p: blocks.weight_uav(uav, x_uav[r], x_uav[0, 4:], p)),
+        ("weight_bot", lambda r, p: _no_shift(blocks.weight_bot(
+            bot, x_bot[r], 1000, (int(mu[0]), int(mu[2])), per_particle=p))),
+        ("weight_uav", lambda r, p: _no_shift(blocks.weight_uav(uav, x_uav[r], x_uav[0, 4:],
+                                                                per_particle=p))),
     ]
+
+
+def _no_shift(out: tuple) -> tuple:
+    """A weight block's (w, shift, flags) as (w, flags)."""
+    return out[0], out[2]
 
 
 @pytest.mark.parametrize("index", range(5))
 def test_per_particle_flags_are_each_particle_alone(index: int) -> None:
     """per_particle=True gives, for every particle, the flags of that particle on its own,
-    and ORed they are the block's flags."""
+    and ORed they are the block's flags (the weights themselves are relative to the others)."""
     name, call = _line_rate_calls(np.random.default_rng(index))[index]
     rows = np.arange(64)
     out, each = call(rows, True)

@@ -28,8 +28,9 @@ def test_model_run_json_and_plots(tmp_path: Path) -> None:
     first = doc["per_step"]
     assert len(first["truth"]) == len(first["float"]) == len(first["fixed"]) == 9
     assert len(first["flags"]) == 9
-    for name in ("bot_estimate.png", "bot_error.png"):
-        assert (tmp_path / name).stat().st_size > 1000
+    assert len(doc["plots"]) == 2
+    for name in doc["plots"]:
+        assert Path(name).parent == tmp_path and Path(name).stat().st_size > 1000
 
 
 def test_model_run_reproducible(tmp_path: Path) -> None:

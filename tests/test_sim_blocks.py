@@ -123,13 +123,25 @@ MUTANTS = {
     "moments-reference": ("moments", "moments.sv.j2",
                           "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) - {{ W + 1 }}'(ref{{ i }}_q);",
                           "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) + {{ W + 1 }}'(ref{{ i }}_q);"),
-    # the mean's divider without its half-divisor bias: floor instead of round half up
+    # the mean floored instead of rounded half up
     "moments-mean-rounding": ("moments", "moments.sv.j2",
-                              "<< {{ s + 1 }}) + {{ d.nnw }}'(acc_w_q) +",
-                              "<< {{ s + 1 }}) + {{ d.nnw }}'(1'b0) +"),
-    "moments-zero-weights": ("moments", "moments.sv.j2",
-                             "assign mu_out{{ i }} = $unsigned(wzero ? ref",
-                             "assign mu_out{{ i }} = $unsigned(1'b0 ? ref"),
+                              "{{ d.qb + 1 }}'sd{{ 2 ** s }};", "{{ d.qb + 1 }}'sd0;"),
+    # the rescale of the sums truncates instead of rounding
+    "moments-rescale-rounding": ("moments", "moments.sv.j2",
+                                 "+ {{ w + 1 }}'{{ 's' if signed }}d1;",
+                                 "+ {{ w + 1 }}'{{ 's' if signed }}d0;"),
+    # a step counted as beyond reach whatever its shifts
+    "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
+    # absolute weights 2^-t: the running minimum not subtracted
+    "weight-absolute": ("weight_uav", "_weight.sv.j2",
+                        "[TW-1:TF] - rmin{{ lanes - 1 }}, lane_t", "[TW-1:TF], lane_t"),
+    # the running minimum carried over from the previous step
+    "weight-min-per-step": ("weight_bot", "_weight.sv.j2",
+                            "assign r_prev = mfirst_q ? TOP : r_q;", "assign r_prev = r_q;"),
+    "sigma_predict-rounding": ("sigma_predict", "sigma_predict.sv.j2",
+                               "(acc_q + AW'({{ e.half }}))", "(acc_q + AW'(0))"),
+    "sigma_predict-first-term": ("sigma_predict", "sigma_predict.sv.j2",
+                                 "(first_q ? AW'(0) : acc_q)", "(acc_q)"),
     # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
     "weight-bot-z-delay": ("weight_bot", "weight_bot.sv.j2", ".z      (zd_q[ZD*AW-1 -: AW]),",
                            ".z      (zd_q[(ZD-1)*AW-1 -: AW]),"),

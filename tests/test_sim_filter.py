@@ -33,8 +33,9 @@ RUNS = [("bot", "verilator", 1, 5, 512), ("odd", "verilator", 2, 5, 512),
 
 def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, seed: int,
                scenario: str | None = None, testcase: str | None = None,
-               build_root: Path = Path("build"), stall: float = 0.0) -> tuple[object, dict]:
-    cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
+               build_root: Path = Path("build"), stall: float = 0.0,
+               overrides: dict | None = None) -> tuple[object, dict]:
+    cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes, **(overrides or {})})
     module = f"gpf_{cfg.app}"
     out = (build_root / cfg.name / sim / module / "regression.json").resolve()
     out.unlink(missing_ok=True)
@@ -95,53 +96,65 @@ def test_gpf_run_cli(tmp_path: Path, capsys) -> None:
 
 
 # Faults (SPEC 10): (config, scenario, lanes, particles, simulator, the flags expected at each
-# step 1..5). RTL and model must agree on estimates and flags (mismatches 0) and the filter must
-# run to the end; the flags expected here follow from how each scenario is built.
-ZW, SAT, NPD = "zero_weights", "sat", "not_pd"
+# step 1..5, config overrides). RTL and model must agree on estimates and flags (mismatches 0)
+# and the filter must run to the end; the flags expected here follow from how each scenario is
+# built.
+ZW, SAT, NPD, LOW = "zero_weights", "sat", "not_pd", "low_ess"
 FAULTS = {
-    # one bearing a quarter turn off at step 3: every weight 0 there, normal again after
-    "bot-outlier": ("bot", "bot_outlier", 1, 128, "verilator", [[], [], [ZW], [], []]),
-    "bot-outlier-icarus": ("odd", "bot_outlier", 2, 64, "icarus", [[], [], [ZW], [], []]),
-    "uav-gps-glitch": ("uav", "uav_gps_glitch", 2, 128, "verilator", [[], [], [ZW], [], []]),
+    # one bearing a quarter turn off at step 3: no particle within reach there (equal weights,
+    # a prediction), normal again after
+    "bot-outlier": ("bot", "bot_outlier", 1, 128, "verilator", [[], [], [ZW], [], []], {}),
+    "bot-outlier-icarus": ("odd", "bot_outlier", 2, 64, "icarus", [[], [], [ZW], [], []], {}),
+    "uav-gps-glitch": ("uav", "uav_gps_glitch", 2, 128, "verilator", [[], [], [ZW], [], []],
+                       {}),
+    # a bearing 10 sigma off at step 3, within reach: the weights collapse onto a few
+    # particles, the next step samples from the predicted covariance
+    "bot-bearing-glitch": ("bot", "bot_bearing_glitch", 1, 128, "verilator",
+                           [[], [], [LOW], [], []], {}),
     # positions beyond the format from step 2: saturated, then a collapsed (singular) spread
     "bot-far-target": ("bot", "bot_far_target", 1, 128, "verilator",
-                       [[], [SAT], [SAT, NPD], [SAT, NPD], [SAT, NPD]]),
-    # two particles: a rank-1 covariance every step
-    "uav-two-particles": ("uav_seed002", "uav_flight", 1, 2, "verilator", [[NPD]] * 5),
+                       [[], [SAT], [SAT, NPD], [SAT, NPD], [SAT, NPD]], {}),
+    # two particles: a rank-1 covariance every step (an ESS of 1 or 2 is not below N / 8)
+    "uav-two-particles": ("uav_seed002", "uav_flight", 1, 2, "verilator", [[NPD]] * 5, {}),
+    # and with the rule at N / 1: every step is low, the covariance is the prediction
+    "uav-two-particles-predicted": ("uav_seed002", "uav_flight", 1, 2, "verilator",
+                                    [[LOW]] * 5, {"filter.ess_min": 1}),
 }
 
 
 @pytest.mark.parametrize("fault", [pytest.param(f, marks=SIM_MARKS[FAULTS[f][4]])
                                    for f in FAULTS])
 def test_fault_flagged_and_survived(tmp_path: Path, fault: str) -> None:
-    config, scenario, lanes, particles, sim, flags = FAULTS[fault]
+    config, scenario, lanes, particles, sim, flags, overrides = FAULTS[fault]
     result, res = filter_run(config, sim, lanes, 5, particles, seed=1, scenario=scenario,
-                             testcase="test_filter", build_root=tmp_path)
+                             testcase="test_filter", build_root=tmp_path, overrides=overrides)
     check_run(result, res, 5, particles, lanes, tests=1)
     assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
 
 
-# (module, template, text, replacement, scenario): blocks' mutants the whole filter must catch
-# as well, and the controller's own
+# (module, template, text, replacement, scenario, config overrides): blocks' mutants the whole
+# filter must catch as well, and the controller's own
 FILTER_MUTANTS = {
-    "moments-reference": (*MUTANTS["moments-reference"], None),
-    "moments-mean-rounding": (*MUTANTS["moments-mean-rounding"], None),
-    "ctrl-result-reset": ("ctrl", "ctrl.sv.j2", "      est_q <= '0;\n", "", None),  # X
-    "ctrl-zero-weights-keep": ("ctrl", "ctrl.sv.j2", "              sigma_new_q <= sigma_q;",
-                               "              sigma_new_q <= s_mom_tdata[MUW +: SIGW];",
-                               "bot_outlier"),
+    "moments-reference": (*MUTANTS["moments-reference"], None, {}),
+    "moments-mean-rounding": (*MUTANTS["moments-mean-rounding"], None, {}),
+    "weight-absolute-bot": ("weight_bot", "_weight.sv.j2",
+                            *MUTANTS["weight-absolute"][2:], None, {}),
+    "ctrl-result-reset": ("ctrl", "ctrl.sv.j2", "      est_q <= '0;\n", "", None, {}),  # X
+    # the frozen posterior: a low-ESS step keeps the previous Sigma instead of its prediction
+    "ctrl-low-ess-frozen": ("ctrl", "ctrl.sv.j2", "low_ess ? sigma_pred_q :",
+                            "low_ess ? sigma_q :", None, {"filter.ess_min": 0.5}),
     "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "            sticky_q <= sticky_q | flags_q;",
-                    "            sticky_q <= flags_q;", "bot_outlier"),
+                    "            sticky_q <= flags_q;", "bot_outlier", {}),
 }
 
 
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
 @pytest.mark.parametrize("mutant", list(FILTER_MUTANTS))
 def test_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
-    module, template, old, new, scenario = FILTER_MUTANTS[mutant]
+    module, template, old, new, scenario, overrides = FILTER_MUTANTS[mutant]
     templates = mutated_templates(tmp_path, mutant, template, old, new)
     spec = {"steps": 5, "particles": 32, "scenario": scenario} if scenario else {}
-    result = run_sim(load_config("configs/bot.toml"), "gpf_bot", "icarus", seed=1,
+    result = run_sim(load_config("configs/bot.toml", overrides), "gpf_bot", "icarus", seed=1,
                      testcase="test_filter", template_dir=templates,
                      build_root=tmp_path / "build", log_file=tmp_path / "sim.log",
                      extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})

@@ -166,6 +166,7 @@ def corner_sigmas(b: Bench) -> list[dict[tuple[int, int], int]]:
     rank one, and random matrices of every kind."""
     dp, pairs = b.dp, pairs_of(b)
     fl = CHOL_FLOOR_LSB**2
+    lw = dp.chol[0].width          # L's word
     rng = np.random.default_rng(b.rng("cholesky-corners").getrandbits(32))
 
     def mat(fn) -> dict[tuple[int, int], int]:
@@ -190,8 +191,8 @@ def corner_sigmas(b: Bench) -> list[dict[tuple[int, int], int]]:
         mat(lambda i, j: (1 << 34) if i == j else (1 << 34) - (1 << 18)),
         mat(lambda i, j: (1 << 34) if i == j else (1 << 34) - (1 << 17)),
         mat(lambda i, j: (1 << 33) if i == j else (1 << 33) - (1 << 17) + 1),
-        mat(lambda i, j: (1 << (2 * dp.word - 2)) - (1 << dp.word) if i == j else 0),
-        mat(lambda i, j: (1 << (2 * dp.word - 2)) if i == j else 0),
+        mat(lambda i, j: (1 << (2 * lw - 2)) - (1 << lw) if i == j else 0),   # L_jj at its top
+        mat(lambda i, j: (1 << (2 * lw - 2)) if i == j else 0),
         mat(lambda i, j: 300 if i == j else (1 << 40) * (-1) ** (i + j)),   # L_ij saturates
     ]
     mats += [tiny_sigma(b, rng) for _ in range(40)]
