@@ -303,36 +303,36 @@ def rescaled_sums(values: np.ndarray, shift: np.ndarray, scale: np.ndarray) -> n
 
     values (R, N, A) int64 terms of up to 62 bits, one column per accumulator; shift (R, B)
     with N = B x lanes; scale (A,) how many times the shift each accumulator takes. Exact: the
-    beats between two rescales are summed as 31-bit halves in int64, and only those segment
-    sums (a few per step: the running minimum falls rarely) go through Python integers.
-    Returns (R, A) object array."""
+    particles between two rescales (a few segments a step: the running minimum falls rarely)
+    are summed in one pass, in int64 where the column's largest magnitude allows, else as
+    31-bit halves; only the segment sums go through Python integers. Returns (R, A) object."""
     runs, n, cols = values.shape
     beats = shift.shape[1]
     lanes = n // beats
-    halves = [(values >> 31), (values & _LOW)]
-    cums = []
-    for h in halves:
-        beat = h.reshape(runs, beats, lanes, cols).sum(axis=2)
-        cums.append(np.concatenate([np.zeros((runs, 1, cols), np.int64),
-                                    np.cumsum(beat, axis=1)], axis=1))
     event = shift > 0
-    event[:, 0] = False                          # nothing is summed before the first beat
-    seg = np.cumsum(event, axis=1)               # each beat's segment
-    kmax = int(seg[:, -1].max()) + 1
-    er, eb = np.nonzero(event)
-    starts = np.full((runs, kmax), beats, dtype=np.int64)
-    starts[:, 0] = 0
-    starts[er, seg[er, eb]] = eb
-    ends = np.concatenate([starts[:, 1:], np.full((runs, 1), beats, np.int64)], axis=1)
+    event[:, 0] = True                           # every run's first segment starts at beat 0
+    er, eb = np.nonzero(event)                   # segment starts, run by run in order
+    starts = er * n + eb * lanes
+    flat = values.reshape(runs * n, cols)
+    biggest = np.abs(flat).max(axis=0) if flat.size else np.zeros(cols, np.int64)
+    safe = biggest < (1 << 62) // max(n, 1)      # n of them cannot overflow int64
+    seg = np.empty((len(starts), cols), dtype=object)
+    if np.any(safe):
+        seg[:, safe] = np.add.reduceat(flat[:, safe], starts, axis=0).astype(object)
+    if not np.all(safe):
+        wide = flat[:, ~safe]
+        hi = np.add.reduceat(wide >> 31, starts, axis=0).astype(object)
+        lo = np.add.reduceat(wide & _LOW, starts, axis=0).astype(object)
+        seg[:, ~safe] = (hi << 31) + lo
+    rank = np.arange(len(er)) - np.searchsorted(er, er)   # a segment's place in its run
+    kmax = int(rank.max()) + 1
+    padded = np.zeros((runs, kmax, cols), dtype=object)
+    padded[er, rank] = seg
     seg_shift = np.zeros((runs, kmax), dtype=np.int64)
-    seg_shift[er, seg[er, eb]] = shift[er, eb]
-    rows = np.arange(runs)[:, None]
-    hi, lo = ((c[rows, ends] - c[rows, starts]) for c in cums)      # (R, kmax, A)
-    acc = np.zeros((runs, cols), dtype=object)
-    for k in range(kmax):
-        if k:
-            acc = round_shift(acc, seg_shift[:, k, None] * scale[None, :])
-        acc = acc + (hi[:, k].astype(object) << 31) + lo[:, k].astype(object)
+    seg_shift[er, rank] = np.where(eb > 0, shift[er, eb], 0)
+    acc = padded[:, 0]
+    for k in range(1, kmax):
+        acc = round_shift(acc, seg_shift[:, k, None] * scale[None, :]) + padded[:, k]
     return acc
 
 
@@ -344,13 +344,16 @@ def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
     dx, f = _saturate_columns(dp, x - ref[:, None, :])
     flags = np.where(np.any(f, axis=(1, 2)), np.int64(Flag.SAT), np.int64(0))
     guard = product_guard(dp)
-    wdx = w[..., None] * dx                       # exact: weight x state bits
+    values = np.empty((runs, n_part, 2 + n + len(pairs)), dtype=np.int64)
+    values[..., 0] = w
+    wdx = values[..., 1:1 + n]
+    np.multiply(w[..., None], dx, out=wdx)            # exact: weight x state bits
     p = shift_round(wdx, dp.weight.frac_bits - guard, "half_up", width=62)  # |w| <= 1
-    cols = [w[..., None], wdx]
-    cols += [(p[..., i] * dx[..., j])[..., None] for i, j in pairs]
-    cols.append((w * w)[..., None])
+    for q, (i, j) in enumerate(pairs):
+        np.multiply(p[..., i], dx[..., j], out=values[..., 1 + n + q])
+    np.multiply(w, w, out=values[..., -1])
     scale = np.array([1] * (1 + n + len(pairs)) + [2], dtype=np.int64)
-    acc = rescaled_sums(np.concatenate(cols, axis=-1), shift, scale)
+    acc = rescaled_sums(values, shift, scale)
     in_reach = np.any(shift > 0, axis=1)
     sums = Sums(acc[:, 0], acc[:, 1:1 + n], acc[:, 1 + n:1 + n + len(pairs)], acc[:, -1],
                 in_reach, guard)

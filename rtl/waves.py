@@ -13,7 +13,7 @@ from pathlib import Path
 
 from gpf.config import Config
 from gpf.model.fixed import Format
-from gpf.model.formats import datapath
+from gpf.model.formats import SHIFT_BITS, datapath
 from gpf.rtl.generate import (
     MODULES,
     cholesky_context,
@@ -25,6 +25,7 @@ from gpf.rtl.generate import (
     propagate_uav_context,
     recip_context,
     sample_cond_context,
+    sigma_predict_context,
     sqrt_context,
 )
 from gpf.rtl.gtkw import Group, Trace, write_gtkw
@@ -313,12 +314,17 @@ def moments_view(cfg: Config, sim: str) -> list[Group]:
                          label=f"Sigma{d['i']}{d['j']}", frac_bits=dp.cov_frac(d["i"], d["j"])))
         off += d["out_w"]
     inner = [_bit(f"{top}.busy_q", "busy (step taken, result pending)"),
+             Trace(f"{top}.sh5_q", k["shw"] - 1, 0, label="rescale of this beat (shift)",
+                   frac_bits=0),
+             _bit(f"{top}.acc_reach_q", "a particle within reach"),
              _bit(f"{top}.fin_go_q", "sums complete"),
              Trace(f"{top}.fin_c_q", k["t_w"] - 1, 0, label="finalise clock", frac_bits=0),
              Trace(f"{top}.acc_w_q", k["ws_w"] - 1, 0, label="W = sum w",
                    frac_bits=dp.weight.frac_bits),
              Trace(f"{top}.acc_s1_0_q", k["s1_w"] - 1, 0, signed=True, label="S1_0",
                    frac_bits=dp.weight.frac_bits + dp.x[0].frac_bits),
+             Trace(f"{top}.acc_ww_q", k["wws_w"] - 1, 0, label="sum w^2",
+                   frac_bits=2 * dp.weight.frac_bits),
              Trace(f"{top}.m0", k["mean"][0]["qb"] - 1, 0, signed=True, label="m_0",
                    frac_bits=dp.chol[0].frac_bits)]
     if k["uav"]:
@@ -329,13 +335,18 @@ def moments_view(cfg: Config, sim: str) -> list[Group]:
         Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
         _stream(top, "input x, w", "s_axis", k["lane_w"], cfg.lanes,
                 xs + [("w", n * word, k["ww"], dp.weight.frac_bits)], signed=True),
+        Group("input shift", [Trace(f"{top}.s_axis_tdata", cfg.lanes * k["lane_w"] + k["shw"]
+                                    - 1, cfg.lanes * k["lane_w"], label="shift (the beat's "
+                                    "rescale)", frac_bits=0)]),
         Group("operands", [Trace(f"{top}.op", (i + 1) * word - 1, i * word, signed=True,
                                  label=f"ref{i}", frac_bits=dp.x[i].frac_bits)
                            for i in range(n)]),
         _stream(top, "output mu", "m_axis", k["out_w"], 1,
                 [(f"mu{i}", i * word, word, dp.x[i].frac_bits) for i in range(n)], signed=True),
-        Group("output Sigma, flags", sig + [Trace(f"{top}.m_axis_tdata", off + 2, off,
-                                                  label="flags (ZERO_WEIGHTS, SAT)")]),
+        Group("output Sigma, flags, ESS", sig + [
+            Trace(f"{top}.m_axis_tdata", off + 2, off, label="flags (ZERO_WEIGHTS, SAT)"),
+            Trace(f"{top}.m_axis_tdata", off + 2 + dp.ess.width, off + 3,
+                  label=f"ESS ({dp.ess})", frac_bits=dp.ess.frac_bits)]),
         Group("accumulate and finalise", inner),
     ]
 
@@ -353,20 +364,35 @@ def _weight_stream(top: str, cfg: Config, side: str) -> Group:
         fields += [("w", width, dp.weight.width, dp.weight.frac_bits, False),
                    ("sat", width + dp.weight.width, 1, None, False)]
         width += dp.weight.width + 1
-    label = "input particles" if side == "s_axis" else f"output particles, w ({dp.weight}), sat"
+    label = "input particles" if side == "s_axis" else \
+        f"output particles, w ({dp.weight}), sat, the beat's shift"
+    shift = [Trace(f"{top}.{side}_tdata", width * cfg.lanes + SHIFT_BITS - 1,
+                   width * cfg.lanes, label="shift (rescale)", frac_bits=0)
+             ] if side == "m_axis" else []
     return Group(label, [_bit(f"{top}.{side}_tvalid"), _bit(f"{top}.{side}_tready"),
                          _bit(f"{top}.{side}_tlast")] + [
         Trace(f"{top}.{side}_tdata", width * i + off + w - 1, width * i + off,
               label=f"lane{i} {name}", signed=signed, frac_bits=frac)
-        for i in range(cfg.lanes) for name, off, w, frac, signed in fields])
+        for i in range(cfg.lanes) for name, off, w, frac, signed in fields] + shift)
 
 
 def _weight_tail(lane: str, cfg: Config, terms: int) -> list[Trace]:
     dp = datapath(cfg)
     return [Trace(f"{lane}.u{k}_q", dp.u.width - 1, 0, label=f"u{k} ({dp.u})", signed=True,
                   frac_bits=dp.u.frac_bits) for k in range(terms)] + [
-        Trace(f"{lane}.t_q", dp.t.width - 1, 0, label=f"t ({dp.t})", frac_bits=dp.t.frac_bits),
-        Trace(f"{lane}.w", dp.weight.width - 1, 0, label="w", frac_bits=dp.weight.frac_bits)]
+        Trace(f"{lane}.t_q", dp.t.width - 1, 0, label=f"t ({dp.t})", frac_bits=dp.t.frac_bits)]
+
+
+def _relative(top: str, cfg: Config) -> Group:
+    """Stage M: the step's running minimum of floor(t) and lane 0's t - R."""
+    dp = datapath(cfg)
+    rw = dp.t.width - dp.t.frac_bits
+    return Group("relative weights (stage M)", [
+        _bit(f"{top}.mfirst_q", "beat at the lanes' output starts a step"),
+        Trace(f"{top}.r_q", rw - 1, 0, label="R: running minimum of floor(t)", frac_bits=0),
+        Trace(f"{top}.shift_d", SHIFT_BITS - 1, 0, label="shift of this beat", frac_bits=0),
+        Trace(f"{top}.trel_q", dp.t.width - 1, 0, label="lane 0 t - R",
+              frac_bits=dp.t.frac_bits)])
 
 
 def weight_bot_view(cfg: Config, sim: str) -> list[Group]:
@@ -393,6 +419,7 @@ def weight_bot_view(cfg: Config, sim: str) -> list[Group]:
             Trace(f"{lane}.d_q", aw - 1, 0, label="d = z - theta (turns)", signed=True,
                   frac_bits=aw),
         ] + _weight_tail(lane, cfg, 1)),
+        _relative(top, cfg),
     ]
 
 
@@ -411,6 +438,7 @@ def weight_uav_view(cfg: Config, sim: str) -> list[Group]:
         Group("lane 0 pipeline", [
             Trace(f"{lane}.dv{k}_q", word - 1, 0, label=f"dv{k}", signed=True,
                   frac_bits=fmt.frac_bits) for k in range(3)] + _weight_tail(lane, cfg, 3)),
+        _relative(top, cfg),
     ]
 
 
@@ -450,6 +478,30 @@ def cholesky_view(cfg: Config, sim: str) -> list[Group]:
     ]
 
 
+def sigma_predict_view(cfg: Config, sim: str) -> list[Group]:
+    dp = datapath(cfg)
+    k = sigma_predict_context(cfg)
+    pairs = cholesky_context(cfg)["inputs"]
+    sigma = [(f"Sigma_{x['i']}{x['j']}", x["off"], x["w"], dp.cov_frac(x["i"], x["j"]))
+             for x in pairs if x["i"] == x["j"]]
+    top = "sigma_predict"
+    return [
+        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
+        _stream(top, "input Sigma (diagonal)", "s_axis", k["in_width"], 1, sigma, signed=True),
+        _stream(top, "output predicted Sigma (diagonal)", "m_axis", k["out_width"], 1, sigma,
+                signed=True),
+        Group("the term program", [
+            _bit(f"{top}.busy_q", "busy"),
+            Trace(f"{top}.k_q", k["kw"] - 1, 0, label="term", frac_bits=0),
+            # wider than 64 bits: GTKWave shows them in hex
+            Trace(f"{top}.prod_q", k["sw"] + k["cw"] - 1, 0, label="product (hex)",
+                  frac_bits=None),
+            Trace(f"{top}.acc_q", k["acc_w"] - 1, 0,
+                  label=f"entry's sum, fraction {k['top']} (hex)", frac_bits=None),
+            _bit(f"{top}.sat_q", "SAT so far")]),
+    ]
+
+
 def _fields(path: str, fields: list, lanes: int = 1, only: set[str] | None = None
             ) -> list[Trace]:
     """Traces of the Fields (tb.scoreboard) packed LSB first in `path`, lanes concatenated."""
@@ -483,17 +535,23 @@ def filter_view(cfg: Config, sim: str) -> list[Group]:
                   "5 moments, 6-7 Cholesky, 8 out)", frac_bits=0),
             Trace(f"{top}.u_ctrl.sent_q", cfg.particles.bit_length() - 1, 0,
                   label="particles sent", frac_bits=0),
-            Trace(f"{top}.u_ctrl.flags_q", 2, 0, label="flags (NOT_PD, ZERO_WEIGHTS, SAT)"),
+            Trace(f"{top}.u_ctrl.flags_q", 3, 0,
+                  label="flags (LOW_ESS, NOT_PD, ZERO_WEIGHTS, SAT)"),
+            _bit(f"{top}.u_ctrl.pred_done_q", "predicted Sigma ready"),
             Trace(f"{top}.u_ctrl.cycles_q", 31, 0, label="clocks this step", frac_bits=0)]
             + handshake),
         Group("step input", _fields(f"{top}.s_step_tdata", s.step)),
-        Group("result", _fields(f"{top}.m_est_tdata", s.est, only=mu | {"flags", "cycles"})),
+        Group("result", _fields(f"{top}.m_est_tdata", s.est,
+                                only=mu | {"flags", "cycles", "ess"})),
         Group("conditioning tap", [_bit(f"{top}.m_cond_tvalid"), _bit(f"{top}.m_cond_tready"),
                                    _bit(f"{top}.m_cond_tlast")]
               + _fields(f"{top}.m_cond_tdata", s.cond, cfg.lanes)),
         Group("particle tap", [_bit(f"{top}.m_part_tvalid"), _bit(f"{top}.m_part_tready"),
                                _bit(f"{top}.m_part_tlast")]
-              + _fields(f"{top}.m_part_tdata", s.part, cfg.lanes)),
+              + _fields(f"{top}.m_part_tdata", s.part, cfg.lanes)
+              + [Trace(f"{top}.m_part_tdata", cfg.lanes * sum(f.fmt.width for f in s.part)
+                       + SHIFT_BITS - 1, cfg.lanes * sum(f.fmt.width for f in s.part),
+                       label="shift (rescale)", frac_bits=0)]),
     ]
 
 
@@ -504,7 +562,7 @@ VIEWS.update(propagate_uav=propagate_uav_view)
 VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 VIEWS.update(moments=moments_view)
 VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
-VIEWS.update(cholesky=cholesky_view)
+VIEWS.update(cholesky=cholesky_view, sigma_predict=sigma_predict_view)
 VIEWS.update(gpf_bot=filter_view, gpf_uav=filter_view)
 
 
