@@ -217,7 +217,7 @@ def monte_carlo(cfg: Config, runs: int = 10, steps: int | None = None,
     ess = {k: np.full((runs, steps + 1), np.nan) for k in ("fixed", "float")}
     observer = None
     bar = tqdm(total=runs * steps, desc=f"{cfg.name} {name} N={count}", unit="step",
-               disable=not progress, leave=False, unit_scale=True)
+               disable=None if progress else True, leave=False, unit_scale=True)  # a terminal only
     for first in range(0, runs, batch):
         ids = list(range(first, min(runs, first + batch)))
         scs = [scenario if isinstance(scenario, scenarios.Scenario)

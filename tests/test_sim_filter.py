@@ -65,6 +65,7 @@ def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: 
 def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: int) -> None:
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7)
     check_run(result, res, steps, particles, lanes)
+    assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
 
 
 @pytest.mark.regress
@@ -130,6 +131,8 @@ FAULTS = {
     # particles, the next step samples from the predicted covariance
     "bot-bearing-glitch": ("bot", "bot_bearing_glitch", 1, 128, "verilator",
                            [[], [], [LOW], [], []], {}),
+    "bot-bearing-glitch-icarus": ("odd", "bot_bearing_glitch", 2, 64, "icarus",
+                                  [[], [], [LOW], [LOW], []], {}),
     # positions beyond the format from step 2: saturated, then a collapsed (singular) spread
     "bot-far-target": ("bot", "bot_far_target", 1, 128, "verilator",
                        [[], [SAT], [SAT, NPD], [SAT, NPD], [SAT, NPD]], {}),

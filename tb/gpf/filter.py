@@ -148,6 +148,7 @@ class RunResult:
     period_per_step: list[int] = field(default_factory=list)  # clocks between result beats
     flags: list[list[str]] = field(default_factory=list)
     ess: list[float] = field(default_factory=list)             # per step, as m_est reports it
+    rescales: int = 0          # beats after a step's first whose shift rescaled the sums
     rmse: dict[str, float] = field(default_factory=dict)       # the primary metric
     metrics: dict[str, Any] = field(default_factory=dict)      # every metric, all and last 20 %
     lost_track: bool = False       # the RTL's error over the last 20 % > 3 x float64's
@@ -289,6 +290,7 @@ class FilterBench:
                 assert lasts == [False] * (beats - 1) + [True], f"step {k}: {tap} tlast wrong"
                 self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes,
                                                      per_beat), first_beat=lo)
+            res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
             sticky |= res.flags
             est = unpack([mons["est"][k - 1].data], s.est, 1)
             exp_est = expected_est(s, res, sticky)
