@@ -59,7 +59,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2)
     args = parser.parse_args()
     n, steps, runs = args.particles, args.steps, args.runs
-    print(f"| model | app | runs at once | N | steps | particle-steps/s |")
+    print("| model | app | runs at once | N | steps | particle-steps/s |")
     print("|---|---|---|---|---|---|")
     for name, make in (("bot", bot_fixed_observer), ("uav", uav_flight)):
         cfg = load_config(f"configs/{name}.toml")

@@ -173,7 +173,8 @@ def datapath(cfg: Config, word: int | None = None) -> Datapath:
     h_frac = w - 1 - UAV_GYRO_INT_BITS - (math.floor(math.log2(dt / 2)) + 1)
     return Datapath(cfg.app, x, chol, cfg.noise, weight, w, u, t, consts,
                     None, _exp2(t, weight), gyro=gyro, accel=accel,
-                    rot=Format(True, 1, w - 2), h_frac=h_frac, ess=_ess(cfg), ess_shift=_ess_shift(cfg))
+                    rot=Format(True, 1, w - 2), h_frac=h_frac, ess=_ess(cfg),
+                    ess_shift=_ess_shift(cfg))
 
 
 def _ess_shift(cfg: Config) -> int | None:

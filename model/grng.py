@@ -343,7 +343,8 @@ class GrngStream:
             if n:
                 self.state[:, component] = states[:, -1]
         lanes = self.model.lanes
-        out = self.model.from_uniforms(words.reshape(len(self.state) // lanes, lanes, n).transpose(0, 2, 1))
+        words = words.reshape(len(self.state) // lanes, lanes, n).transpose(0, 2, 1)
+        out = self.model.from_uniforms(words)
         return out[0] if self.single else out
 
 

@@ -7,8 +7,8 @@ and the whole attitude error (deg). Arrays are (..., n) estimates and truths; er
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -28,8 +28,9 @@ def test_shipped_configs_load(path: Path) -> None:
 
 def test_seed002_word_lengths() -> None:
     uav = load_config("configs/uav.toml")
-    # 18-bit words from the word-length study (README); seed 002's own in uav_seed002.toml
-    assert [uav.formats[k].width for k in ("quaternion", "velocity", "weight")] == [18] * 3
+    # 20-bit states, an 18-bit weight from the full-flight study (README, "Robustness"); seed
+    # 002's own in uav_seed002.toml
+    assert [uav.formats[k].width for k in ("quaternion", "velocity", "weight")] == [20, 20, 18]
     seed002 = load_config("configs/uav_seed002.toml")
     assert [str(seed002.formats[k]) for k in ("quaternion", "velocity", "weight")] == [
         "s3.20", "s10.13", "u1.23"]

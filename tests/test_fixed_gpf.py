@@ -13,8 +13,8 @@ from gpf.config import load_config
 from gpf.model import blocks
 from gpf.model.blocks import Flag
 from gpf.model.fixed_gpf import FixedGPF, run
-from gpf.model.float_gpf import FloatGPF, propagate_uav
 from gpf.model.float_blocks import exponent_bot
+from gpf.model.float_gpf import FloatGPF, propagate_uav
 from gpf.model.formats import datapath
 from gpf.model.scenarios import bot_fixed_observer, uav_flight
 

@@ -37,10 +37,10 @@ def _started(*args: Any, **kwargs: Any) -> None:
 @pytest.fixture
 def stubbed(monkeypatch: pytest.MonkeyPatch) -> None:
     import gpf.model.grng
-    import gpf.study.montecarlo
     import gpf.rtl.generate
     import gpf.run
     import gpf.sim
+    import gpf.study.montecarlo
 
     for module, name in ((gpf.sim, "run_sim"), (gpf.run, "run_filter"),
                          (gpf.study.montecarlo, "monte_carlo"), (gpf.rtl.generate, "generate")):
@@ -379,10 +379,11 @@ def test_values_the_generator_cannot_build(stubbed: None, capsys: pytest.Capture
 
 
 def test_uav_formats_must_share_one_word(capsys: pytest.CaptureFixture[str]) -> None:
-    status, err = run_cli(["generate", "--config", "uav", "--set", "formats.velocity=s6.15"],
+    quaternion = load_config("configs/uav.toml").formats["quaternion"]
+    status, err = run_cli(["generate", "--config", "uav", "--set", "formats.velocity=s6.17"],
                           capsys)
-    assert_one_line(status, err, "formats.velocity = 's6.15': 22 bits; must be as wide as "
-                    "formats.quaternion = 's1.16' (18 bits")
+    assert_one_line(status, err, "formats.velocity = 's6.17': 24 bits; must be as wide as "
+                    f"formats.quaternion = '{quaternion}' ({quaternion.width} bits")
     status, err = run_cli(["generate", "--config", "uav", "--set", "uav.sigma_v=1e-12"], capsys)
     assert_one_line(status, err, "configs/uav.toml: the RTL of this config cannot be generated: "
                     "weight: shifts")

@@ -65,7 +65,6 @@ def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: 
 def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: int) -> None:
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7)
     check_run(result, res, steps, particles, lanes)
-    assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
 
 
 @pytest.mark.regress
@@ -149,6 +148,8 @@ def test_fault_flagged_and_survived(tmp_path: Path, fault: str) -> None:
                              testcase="test_filter", build_root=tmp_path, overrides=overrides)
     check_run(result, res, 5, particles, lanes, tests=1)
     assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
+    if scenario == "bot_bearing_glitch":   # the glitch step's best particles come one by one
+        assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
 
 
 # (module, template, text, replacement, scenario, config overrides): blocks' mutants the whole

@@ -152,6 +152,17 @@ def stack(b: Bench, mats: list[dict[tuple[int, int], int]]) -> dict[str, np.ndar
             for i, j in pairs_of(b)}
 
 
+async def run_matrices(dut: SimHandleBase, blk: StreamBlock, b: Bench,
+                       mats: list[dict[tuple[int, int], int]], stalls: float, tag: str,
+                       expect_mismatch: bool = False):
+    """One matrix a beat through a serial matrix block (this one or sigma_predict), random
+    stalls both sides; returns run_stream's (scoreboard, source, sink)."""
+    idle_inputs(dut)
+    await start(dut)
+    return await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), stalls, stalls,
+                            tag, expect_mismatch=expect_mismatch)
+
+
 def random_inputs(b: Bench) -> Inputs:
     def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
         rng = np.random.default_rng(b.rng(tag).getrandbits(32))
@@ -216,10 +227,7 @@ async def test_corners(dut: SimHandleBase) -> None:
     b = bench()
     blk = block(b)
     mats = corner_sigmas(b)
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, out = await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), 0.2, 0.2,
-                                  "cholesky-corners")
+    sb, _, out = await run_matrices(dut, blk, b, mats, 0.2, "cholesky-corners")
     dut._log.info("%d corner matrices: %s", len(mats), sb.summary())
     sb.assert_clean()
     flags = unpack([beat.data for beat in out.beats], blk.fields_out, 1)["flags"][:, 0]
@@ -236,10 +244,7 @@ async def test_floor_edge(dut: SimHandleBase) -> None:
     blk = block(b)
     rng = np.random.default_rng(b.rng("cholesky-floor").getrandbits(32))
     mats = [tiny_sigma(b, rng) for _ in range(200)]
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, out = await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), 0.1, 0.1,
-                                  "cholesky-floor")
+    sb, _, out = await run_matrices(dut, blk, b, mats, 0.1, "cholesky-floor")
     sb.assert_clean()
     flags = unpack([beat.data for beat in out.beats], blk.fields_out, 1)["flags"][:, 0]
     floored = float(np.mean((flags & Flag.NOT_PD) != 0))
@@ -267,9 +272,6 @@ async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     blk = block(b, bad)
     rng = np.random.default_rng(b.rng("bad").getrandbits(32))
     mats = [random_sigma(b, rng) for _ in range(200)]
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, _ = await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), 0.2, 0.2,
-                                "cholesky-bad", expect_mismatch=True)
+    sb, _, _ = await run_matrices(dut, blk, b, mats, 0.2, "cholesky-bad", expect_mismatch=True)
     assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
     dut._log.info("corrupted model caught: %s", sb.first_mismatch)

@@ -9,7 +9,6 @@ to RunSpec.out as JSON for `gpf run` to report.
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -24,9 +23,9 @@ from cocotb.triggers import ReadOnly, RisingEdge, SimTimeoutError, with_timeout
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
 from gpf.model.float_gpf import FloatGPF
+from gpf.model.formats import SHIFT_BITS
 from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
-from gpf.model.formats import SHIFT_BITS
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names

@@ -15,17 +15,16 @@ from gpf.model.blocks import Flag, predicted_sigma
 from gpf.model.fixed import Format
 from gpf.model.formats import Const
 from gpf.rtl.generate import sigma_predict_context
-from gpf.tb.cholesky.test_cholesky import corner_sigmas, pairs_of, random_sigma, stack
-from gpf.tb.harness import Bench, bench, start
-from gpf.tb.scoreboard import Field, unpack
-from gpf.tb.streaming import (
-    Inputs,
-    StreamBlock,
-    check_latency_and_throughput,
-    check_random_beats,
-    idle_inputs,
-    run_stream,
+from gpf.tb.cholesky.test_cholesky import (
+    corner_sigmas,
+    pairs_of,
+    random_sigma,
+    run_matrices,
+    stack,
 )
+from gpf.tb.harness import Bench, bench
+from gpf.tb.scoreboard import Field, unpack
+from gpf.tb.streaming import Inputs, StreamBlock, check_latency_and_throughput, check_random_beats
 
 FLAGS = Format.parse("u3.0")
 
@@ -78,10 +77,7 @@ async def test_corners(dut: SimHandleBase) -> None:
     b = bench()
     blk = block(b)
     mats = corner_sigmas(b)
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, out = await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), 0.2, 0.2,
-                                  "sigma_predict-corners")
+    sb, _, out = await run_matrices(dut, blk, b, mats, 0.2, "sigma_predict-corners")
     dut._log.info("%d corner matrices: %s", len(mats), sb.summary())
     sb.assert_clean()
     flags = unpack([beat.data for beat in out.beats], blk.fields_out, 1)["flags"][:, 0]
@@ -109,9 +105,7 @@ async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     blk = block(b, predict_model(b, bad))
     rng = np.random.default_rng(b.rng("bad").getrandbits(32))
     mats = [random_sigma(b, rng) for _ in range(200)]
-    idle_inputs(dut)
-    await start(dut)
-    sb, _, _ = await run_stream(dut, blk, b, stack(b, mats), [True] * len(mats), 0.2, 0.2,
-                                "sigma_predict-bad", expect_mismatch=True)
+    sb, _, _ = await run_matrices(dut, blk, b, mats, 0.2, "sigma_predict-bad",
+                                  expect_mismatch=True)
     assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
     dut._log.info("corrupted model caught: %s", sb.first_mismatch)

@@ -186,8 +186,8 @@ def corner_steps(b: Bench) -> dict[str, tuple[np.ndarray, dict[str, int]]]:
 @cocotb.test()
 async def test_corners(dut: SimHandleBase) -> None:
     """w exactly 1 (zero innovation), no particle within reach (z opposite the particles: every
-    weight in (1/2, 1], no rescale), dx/dy saturation with the observer at either end, bearings across
-    +-1/2 turn, extremes, and a new best particle on every beat (rescales)."""
+    weight in (1/2, 1], no rescale), dx/dy saturation with the observer at either end, bearings
+    across +-1/2 turn, extremes, and a new best particle on every beat (rescales)."""
     b = bench()
     blk, dp = block(b), datapath(b.cfg)
     steps = corner_steps(b)
