@@ -30,7 +30,7 @@ from gpf.model.primitives import div_round, sqrt_round
 
 class Flag(IntFlag):
     SAT = 1            # a datapath value saturated
-    ZERO_WEIGHTS = 2   # no particle within the exponent's reach: equal weights (a prediction)
+    ZERO_WEIGHTS = 2   # no particle within the exponent's reach: every weight in (1/2, 1]
     NOT_PD = 4         # a Cholesky pivot was below the floor: regularised
     LOW_ESS = 8        # effective sample size below ess_min: the predicted covariance is used
 
@@ -438,8 +438,8 @@ class MomentsResult:
 def moments_batch(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
                   ref: np.ndarray, pairs: list[tuple[int, int]]) -> MomentsResult:
     """The moments block over one step's particles of R runs (see accumulate). No particle
-    within reach (every exponent >= reach_top) gives every particle the same weight: mu and
-    Sigma are then the predicted mean and spread, and ZERO_WEIGHTS says so."""
+    within reach (every exponent >= reach_top) leaves every weight in (1/2, 1]: mu and Sigma
+    are then about the predicted mean and spread, and ZERO_WEIGHTS says so."""
     sums, flags = accumulate(dp, x, w, shift, ref, pairs)
     mu, sigma, ess, f = finalise(dp, sums, ref, pairs)
     flags = flags | f

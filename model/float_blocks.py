@@ -12,7 +12,7 @@ yardstick for the fixed-point model, so every convention below is the hardware's
   exponent t = 0.5 ||v_gps - v||^2 / sigma_v^2 log2(e).
 - Weights w = 2^-(t - min t) with t clamped at REACH = 2^8: relative to the step's best
   particle, as in fixed point. A step whose every exponent is at least REACH - 1 has no
-  particle within reach: its weights are then all equal (flag "zero_weights").
+  particle within reach: its weights are then all in (1/2, 1] (flag "zero_weights").
 - Shapes may carry a leading run axis R: x (R, N, n), w (R, N), per-run operands (R, ...).
 - Omega(w) = [[0,-wx,-wy,-wz],[wx,0,wz,-wy],[wy,-wz,0,wx],[wz,wy,-wx,0]]: identical to seed 002
   eq. 12 (and eq. 3); it is q_dot = 1/2 q (x) [0, w] with the Hamilton product.
@@ -83,7 +83,7 @@ def exponent_bot(x: Array, z: Any, obs: Array, cfg: Any) -> Array:
 
 def relative_weights(t: Array) -> tuple[Array, Array]:
     """w = 2^-(t - min t) over the last axis, t clamped at REACH; and per run whether no
-    particle is within reach (every exponent >= REACH - 1): its weights are then all equal."""
+    particle is within reach (every exponent >= REACH - 1): its weights are then in (1/2, 1]."""
     t = np.minimum(t, REACH)
     best = t.min(axis=-1, keepdims=True)
     return np.exp2(best - t), best[..., 0] >= REACH - 1

@@ -305,8 +305,8 @@ def _fault_step(steps: int) -> int:
 
 def bot_outlier(cfg: Any, steps: int, seed: int) -> Scenario:
     """bot_fixed_observer with one bearing a quarter turn off at step FAULT_STEP: no particle
-    within the exponent's reach (flag ZERO_WEIGHTS: equal weights, the step a prediction); the
-    bearings after it are normal again."""
+    within the exponent's reach (flag ZERO_WEIGHTS: every weight in (1/2, 1], the step a
+    prediction); the bearings after it are normal again."""
     sc = bot_fixed_observer(cfg, steps, seed)
     k = _fault_step(steps)
     sc.measurements["z"][k] = wrap_angle(sc.measurements["z"][k] + math.pi / 2)
