@@ -1,7 +1,8 @@
 # Gaussian particle filter hardware: generator, models, cocotb testbenches.
 #   make sim    the main job: the whole filter (bot, N = 1024, 50 steps, Verilator), every
 #               particle checked; MODULE=<block> for one block's testbench
-#   make test   everything CI runs; make regress: the full 50-step whole-filter regressions
+#   make test   everything CI runs; make regress: the full 50-step whole-filter regressions,
+#               the long uav flight and the rest of the blocks' Verilator matrix
 # Both create .venv and install the pinned packages from pyproject.toml on first use.
 
 SHELL   := /bin/bash
@@ -56,10 +57,10 @@ sim: $(STAMP)
 	$(if $(MODULE),$(BIN)/gpf sim $(SIM_ARGS),$(BIN)/gpf run $(RUN_ARGS))
 
 test: $(STAMP)
-	$(BIN)/pytest -n $(JOBS) --junitxml=build/junit.xml
+	$(BIN)/pytest -n $(JOBS) --dist loadgroup --junitxml=build/junit.xml
 
 regress: $(STAMP)
-	$(BIN)/pytest -n $(JOBS) -m regress tests/test_sim_filter.py
+	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py
 
 bench: $(STAMP)
 	$(BIN)/python -m gpf.bench

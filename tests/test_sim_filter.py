@@ -140,12 +140,20 @@ FAULTS = {
 }
 
 
-@pytest.mark.parametrize("fault", [pytest.param(f, marks=SIM_MARKS[FAULTS[f][4]])
-                                   for f in FAULTS])
-def test_fault_flagged_and_survived(tmp_path: Path, fault: str) -> None:
+def fault_param(fault: str) -> object:
+    """Faults of one config, LANES and simulator share a build: one pytest -n worker runs them
+    (pytest --dist loadgroup), one after the other."""
+    config, _, lanes, _, sim, _, _ = FAULTS[fault]
+    marks = [pytest.mark.xdist_group(f"faults-{config}-{lanes}-{sim}")]
+    return pytest.param(fault, marks=[*marks, SIM_MARKS[sim]] if SIM_MARKS[sim] else marks)
+
+
+@pytest.mark.parametrize("fault", [fault_param(f) for f in FAULTS])
+def test_fault_flagged_and_survived(fault: str) -> None:
     config, scenario, lanes, particles, sim, flags, overrides = FAULTS[fault]
     result, res = filter_run(config, sim, lanes, 5, particles, seed=1, scenario=scenario,
-                             testcase="test_filter", build_root=tmp_path, overrides=overrides)
+                             testcase="test_filter", build_root=Path("build") / "faults",
+                             overrides=overrides)
     check_run(result, res, 5, particles, lanes, tests=1)
     assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
     if scenario == "bot_bearing_glitch":   # the glitch step's best particles come one by one
