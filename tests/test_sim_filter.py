@@ -25,7 +25,9 @@ pytestmark = [pytest.mark.sim, pytest.mark.slow]
 BUDGET = 256   # SPEC 9: a dependent step within N/LANES + 256 clocks
 
 # (config, simulator, lanes, steps, particles): Verilator builds are slow and runs fast, Icarus
-# the other way round
+# the other way round. Short runs and faults build at -O0 (4-5 s less a build, the runs last a
+# second) and share the build of their (config, LANES, simulator) on one pytest -n worker.
+SHORT_OPT = "-O0"
 RUNS = [("bot", "verilator", 1, 5, 512), ("odd", "verilator", 2, 5, 512),
         ("uav", "verilator", 1, 5, 512), ("uav_seed002", "verilator", 2, 5, 512),
         ("bot", "icarus", 1, 3, 64), ("uav", "icarus", 2, 3, 64)]
@@ -34,7 +36,8 @@ RUNS = [("bot", "verilator", 1, 5, 512), ("odd", "verilator", 2, 5, 512),
 def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, seed: int,
                scenario: str | None = None, testcase: str | None = None,
                build_root: Path = Path("build"), stall: float = 0.0,
-               overrides: dict | None = None) -> tuple[object, dict]:
+               overrides: dict | None = None,
+               verilator_opt: str | None = None) -> tuple[object, dict]:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes, **(overrides or {})})
     module = f"gpf_{cfg.app}"
     out = (build_root / cfg.name / sim / module / "regression.json").resolve()
@@ -45,7 +48,8 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
         and scenario is None
     result = run_sim(cfg, module, sim, waves=waves, seed=seed, testcase=testcase,
                      extra_env={"GPF_RUN": json.dumps(spec)}, build_root=build_root,
-                     log_file=build_root / cfg.name / f"{module}-{sim}.log")
+                     log_file=build_root / cfg.name / f"{module}-{sim}.log",
+                     verilator_opt=verilator_opt)
     return result, json.loads(out.read_text()) if out.exists() else {}
 
 
@@ -59,11 +63,18 @@ def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: 
         assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]
 
 
+def shared_build(config: str, sim: str, lanes: int) -> list:
+    """The marks that put the runs of one build on one pytest -n worker (--dist loadgroup)."""
+    marks = [pytest.mark.xdist_group(f"gpf-{config}-lanes{lanes}-{sim}")]
+    return [*marks, SIM_MARKS[sim]] if SIM_MARKS[sim] else marks
+
+
 @pytest.mark.parametrize("config,sim,lanes,steps,particles", [
-    pytest.param(*run, marks=SIM_MARKS[run[1]], id=f"{run[0]}-lanes{run[2]}-{run[1]}")
+    pytest.param(*run, marks=shared_build(*run[:3]), id=f"{run[0]}-lanes{run[2]}-{run[1]}")
     for run in RUNS])
 def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: int) -> None:
-    result, res = filter_run(config, sim, lanes, steps, particles, seed=7)
+    result, res = filter_run(config, sim, lanes, steps, particles, seed=7,
+                             verilator_opt=SHORT_OPT)
     check_run(result, res, steps, particles, lanes)
 
 
@@ -124,8 +135,8 @@ FAULTS = {
     # a prediction), normal again after
     "bot-outlier": ("bot", "bot_outlier", 1, 128, "verilator", [[], [], [ZW], [], []], {}),
     "bot-outlier-icarus": ("odd", "bot_outlier", 2, 64, "icarus", [[], [], [ZW], [], []], {}),
-    "uav-gps-glitch": ("uav", "uav_gps_glitch", 2, 128, "verilator", [[], [], [ZW], [], []],
-                       {}),
+    "uav-gps-glitch": ("uav_seed002", "uav_gps_glitch", 2, 128, "verilator",
+                       [[], [], [ZW], [], []], {}),
     # a bearing 10 sigma off at step 3, within reach: the weights collapse onto a few
     # particles, the next step samples from the predicted covariance
     "bot-bearing-glitch": ("bot", "bot_bearing_glitch", 1, 128, "verilator",
@@ -136,24 +147,17 @@ FAULTS = {
     "bot-far-target": ("bot", "bot_far_target", 1, 128, "verilator",
                        [[], [SAT], [SAT, NPD], [SAT, NPD], [SAT, NPD]], {}),
     # two particles: a rank-1 covariance every step (an ESS of 1 or 2 is not below N / 8)
-    "uav-two-particles": ("uav_seed002", "uav_flight", 1, 2, "verilator", [[NPD]] * 5, {}),
+    "uav-two-particles": ("uav_seed002", "uav_flight", 2, 2, "verilator", [[NPD]] * 5, {}),
 }
 
 
-def fault_param(fault: str) -> object:
-    """Faults of one config, LANES and simulator share a build: one pytest -n worker runs them
-    (pytest --dist loadgroup), one after the other."""
-    config, _, lanes, _, sim, _, _ = FAULTS[fault]
-    marks = [pytest.mark.xdist_group(f"faults-{config}-{lanes}-{sim}")]
-    return pytest.param(fault, marks=[*marks, SIM_MARKS[sim]] if SIM_MARKS[sim] else marks)
-
-
-@pytest.mark.parametrize("fault", [fault_param(f) for f in FAULTS])
+@pytest.mark.parametrize("fault", [
+    pytest.param(f, marks=shared_build(FAULTS[f][0], FAULTS[f][4], FAULTS[f][2])) for f in FAULTS])
 def test_fault_flagged_and_survived(fault: str) -> None:
     config, scenario, lanes, particles, sim, flags, overrides = FAULTS[fault]
     result, res = filter_run(config, sim, lanes, 5, particles, seed=1, scenario=scenario,
-                             testcase="test_filter", build_root=Path("build") / "faults",
-                             overrides=overrides)
+                             testcase="test_filter", overrides=overrides,
+                             verilator_opt=SHORT_OPT)
     check_run(result, res, 5, particles, lanes, tests=1)
     assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
     if scenario == "bot_bearing_glitch":   # the glitch step's best particles come one by one
