@@ -68,7 +68,7 @@ def _forget_objects_built_otherwise(build_dir: Path, opt: str) -> None:
 
 
 # Verilator's runtime (verilated.cpp, verilated_vpi.cpp, ...) is the same for every model built
-# with the same switches, yet each build folder compiles it anew: most of a block's build time.
+# with the same switches, yet each build folder compiled it anew: half of a block's build time.
 # The first build of a set of switches keeps its objects, partly linked into one; later builds
 # link that (LOADLIBES) and build none (VM_GLOBAL_*: empty). It lives in build/ whatever the
 # build root, so that tests building elsewhere share it too.
