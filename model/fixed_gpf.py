@@ -52,7 +52,6 @@ class FixedGPF:
         self.cfg = cfg
         self.dp: Datapath = datapath(cfg, word)
         self.particles = particles or cfg.particles
-        self.lanes = cfg.lanes
         if self.particles % cfg.lanes:
             raise ValueError(f"particles = {self.particles}: must be a multiple of "
                              f"lanes = {cfg.lanes}")

@@ -731,11 +731,10 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
     for q, entry in enumerate(program):
         for k, (src, name) in enumerate(entry):
             coef = dp.consts[name].raw if name is not None else 1
-            terms.append({"src": src, "coef": f"{_twos(coef, CONST_WIDTH):X}",
-                          "lsh": top - term_frac(dp, pairs, (src, name)), "first": k == 0,
-                          "last": k == len(entry) - 1, "dest": q})
-            ends.append((sw if src is not None else 2) + CONST_WIDTH
-                        + top - term_frac(dp, pairs, (src, name)))
+            lsh = top - term_frac(dp, pairs, (src, name))
+            terms.append({"src": src, "coef": f"{_twos(coef, CONST_WIDTH):X}", "lsh": lsh,
+                          "first": k == 0, "last": k == len(entry) - 1, "dest": q})
+            ends.append((sw if src is not None else 2) + CONST_WIDTH + lsh)
     acc_w = max(ends) + max(len(e) for e in program).bit_length() + 1
     offs = [sum(sigma_w[:q]) for q in range(len(pairs))]
     entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -83,6 +84,15 @@ def last_window(steps: int) -> slice:
     return slice(steps - count + 1, steps + 1)
 
 
+def lost_track(app: str, judged: dict[str, Any], flt: dict[str, Any]) -> Any:
+    """Lost track: in a tracked metric, the RMS error over the last 20 % (per metric name; a
+    float, or an array over runs) above LOST_FACTOR x the float64 filter's on the same draws."""
+    lost = np.zeros(np.shape(flt[TRACKED[app][0]]), dtype=bool)
+    for name in TRACKED[app]:
+        lost |= np.asarray(judged[name]) > LOST_FACTOR * np.asarray(flt[name])
+    return lost
+
+
 def primary_error(app: str, est: Array, truth: Array) -> Array:
     """The application's primary error per row: bot position (m), uav tilt (deg)."""
     return metric(app, PRIMARY[app]).error(est, truth)
@@ -116,8 +126,8 @@ def run_metrics(app: str, truth: Array, est: dict[str, Array]) -> RunReport:
         err = {name: m.error(e, truth) for name, e in est.items()}
         table[m.name] = {"unit": m.unit, **{w: {name: rms(e[sl]) for name, e in err.items()}
                                            for w, sl in windows.items()}}
-    judged = names[0]
-    lost = any(table[name]["last20"][judged] > LOST_FACTOR * table[name]["last20"]["float"]
-               for name in TRACKED[app])
+    last = {name: table[name]["last20"] for name in TRACKED[app]}
+    lost = bool(lost_track(app, {name: v[names[0]] for name, v in last.items()},
+                           {name: v["float"] for name, v in last.items()}))
     return RunReport({name: table[PRIMARY[app]]["all"][name] for name in names}, table, lost,
                      quantisation)

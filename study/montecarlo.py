@@ -23,7 +23,15 @@ from gpf.model import scenarios
 from gpf.model.blocks import Flag
 from gpf.model.fixed_gpf import FixedGPF
 from gpf.model.float_gpf import FLAGS, FloatGPF, cholesky
-from gpf.study.metrics import LOST_FACTOR, METRICS, PRIMARY, TRACKED, last_window, metric
+from gpf.study.metrics import (
+    LOST_FACTOR,
+    METRICS,
+    PRIMARY,
+    TRACKED,
+    last_window,
+    lost_track,
+    metric,
+)
 
 SCENARIOS: dict[str, Callable[..., scenarios.Scenario]] = {
     "bot_fixed_observer": scenarios.bot_fixed_observer,
@@ -98,12 +106,9 @@ class MonteCarlo:
         """Runs whose error over the last 20 % exceeds LOST_FACTOR x the float64 filter's on
         the same draws, in any tracked metric."""
         last = last_window(self.steps)
-        lost = np.zeros(self.runs, dtype=bool)
-        for name in TRACKED[self.app]:
-            fixed = np.sqrt(self._mse("fixed", name, last))
-            flt = np.sqrt(self._mse("float", name, last))
-            lost |= fixed > LOST_FACTOR * flt
-        return [int(r) for r in np.flatnonzero(lost)]
+        rms = {which: {name: np.sqrt(self._mse(which, name, last)) for name in TRACKED[self.app]}
+               for which in ("fixed", "float")}
+        return [int(r) for r in np.flatnonzero(lost_track(self.app, rms["fixed"], rms["float"]))]
 
     def flag_counts(self) -> dict[str, int]:
         """Steps (over all runs) that raised each flag, fixed point."""

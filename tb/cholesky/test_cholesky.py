@@ -163,6 +163,16 @@ async def run_matrices(dut: SimHandleBase, blk: StreamBlock, b: Bench,
                             tag, expect_mismatch=expect_mismatch)
 
 
+async def check_wrong_model_caught(dut: SimHandleBase, blk: StreamBlock, b: Bench,
+                                   tag: str) -> None:
+    """200 random matrices against a deliberately wrong model: the scoreboard must mismatch."""
+    rng = np.random.default_rng(b.rng("bad").getrandbits(32))
+    mats = [random_sigma(b, rng) for _ in range(200)]
+    sb, _, _ = await run_matrices(dut, blk, b, mats, 0.2, tag, expect_mismatch=True)
+    assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
+    dut._log.info("corrupted model caught: %s", sb.first_mismatch)
+
+
 def random_inputs(b: Bench) -> Inputs:
     def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
         rng = np.random.default_rng(b.rng(tag).getrandbits(32))
@@ -269,9 +279,4 @@ async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
         with mock.patch.object(blocks, "INV_GUARD", blocks.INV_GUARD - 3):
             return good(seen)
 
-    blk = block(b, bad)
-    rng = np.random.default_rng(b.rng("bad").getrandbits(32))
-    mats = [random_sigma(b, rng) for _ in range(200)]
-    sb, _, _ = await run_matrices(dut, blk, b, mats, 0.2, "cholesky-bad", expect_mismatch=True)
-    assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
-    dut._log.info("corrupted model caught: %s", sb.first_mismatch)
+    await check_wrong_model_caught(dut, block(b, bad), b, "cholesky-bad")

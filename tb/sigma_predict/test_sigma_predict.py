@@ -16,15 +16,15 @@ from gpf.model.fixed import Format
 from gpf.model.formats import Const
 from gpf.rtl.generate import sigma_predict_context
 from gpf.tb.cholesky.test_cholesky import (
+    check_wrong_model_caught,
     corner_sigmas,
     pairs_of,
-    random_sigma,
+    random_inputs,
     run_matrices,
-    stack,
 )
 from gpf.tb.harness import Bench, bench
 from gpf.tb.scoreboard import Field, unpack
-from gpf.tb.streaming import Inputs, StreamBlock, check_latency_and_throughput, check_random_beats
+from gpf.tb.streaming import StreamBlock, check_latency_and_throughput, check_random_beats
 
 FLAGS = Format.parse("u3.0")
 
@@ -51,14 +51,6 @@ def block(b: Bench, model=None) -> StreamBlock:
     assert sum(f.fmt.width for f in fields_out) == k["out_width"]
     return StreamBlock("sigma_predict", fields_in, fields_out, 1, k["latency"],
                        model or predict_model(b), interval=k["interval"])
-
-
-def random_inputs(b: Bench) -> Inputs:
-    def inputs(n: int, tag: str) -> dict[str, np.ndarray]:
-        rng = np.random.default_rng(b.rng(tag).getrandbits(32))
-        return stack(b, [random_sigma(b, rng) for _ in range(n)])
-
-    return inputs
 
 
 @cocotb.test()
@@ -102,10 +94,4 @@ async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     c = dp.consts[name]
     raw = c.raw + 1 if dp.app == "bot" else 2 * c.raw
     bad = dataclasses.replace(dp, consts={**dp.consts, name: Const(c.value, raw, c.frac)})
-    blk = block(b, predict_model(b, bad))
-    rng = np.random.default_rng(b.rng("bad").getrandbits(32))
-    mats = [random_sigma(b, rng) for _ in range(200)]
-    sb, _, _ = await run_matrices(dut, blk, b, mats, 0.2, "sigma_predict-bad",
-                                  expect_mismatch=True)
-    assert sb.mismatched > 0 and sb.first_mismatch is not None, "a wrong model passed"
-    dut._log.info("corrupted model caught: %s", sb.first_mismatch)
+    await check_wrong_model_caught(dut, block(b, predict_model(b, bad)), b, "sigma_predict-bad")
