@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 from gpf.config import load_config
@@ -36,8 +37,11 @@ def slang_lint(files: list[Path], top: str) -> str:
 
 
 def icarus_compile(files: list[Path], top: str) -> str:
-    run = subprocess.run(["iverilog", "-g2012", "-o", "/dev/null", "-s", top,
-                          *map(str, files)], capture_output=True, text=True)
+    # Never "-o /dev/null": iverilog marks its output executable, and as root that turns
+    # /dev/null into 0755, which breaks every program that writes there as another user (apt).
+    with tempfile.TemporaryDirectory(prefix="gpf-lint-") as scratch:
+        run = subprocess.run(["iverilog", "-g2012", "-o", str(Path(scratch) / "lint.vvp"),
+                              "-s", top, *map(str, files)], capture_output=True, text=True)
     # Icarus reports what it cannot do as "sorry"; those are real gaps in its SV support
     text = (run.stdout + run.stderr).strip()
     return text if run.returncode or text else ""
