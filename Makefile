@@ -3,6 +3,8 @@
 #               particle checked; MODULE=<block> for one block's testbench
 #   make test   everything CI runs; make regress: the full 50-step whole-filter regressions,
 #               the long uav flight and the rest of the blocks' Verilator matrix
+#   make synth  area (Yosys, xc7) of the whole filter or MODULE=<block>, per block;
+#               make timing: Fmax on an ECP5 (nextpnr); GATE=1: simulate the netlist
 # Both create .venv and install the pinned packages from pyproject.toml on first use.
 
 SHELL   := /bin/bash
@@ -16,6 +18,8 @@ SIM     ?= verilator
 MODULE  ?=
 SEED    ?=
 WAVES   ?= 0
+GATE    ?= 0
+LANES   ?=
 JOBS    ?= 2
 STEPS   ?= 50
 PARTICLES ?= 1024
@@ -28,12 +32,16 @@ export VERILATOR_ROOT
 export PATH = $(if $(VERILATOR_ROOT),$(VERILATOR_ROOT)/bin:)$(CURDIR)/$(BIN):$(SYSTEM_PATH)
 
 WAVES_ARG = $(if $(filter 1 yes true,$(WAVES)),--waves)
-SIM_ARGS = --config $(CONFIG) --sim $(SIM) --module $(MODULE) $(WAVES_ARG) \
-           $(if $(SEED),--seed $(SEED))
-RUN_ARGS = --config $(CONFIG) --sim $(SIM) --steps $(STEPS) --particles $(PARTICLES) \
-           $(WAVES_ARG) $(if $(SEED),--seed $(SEED)) --plot build/plots --json build/sim-$(CONFIG).json
+GATE_ARG  = $(if $(filter 1 yes true,$(GATE)),--gate)
+LANES_ARG = $(if $(LANES),--set filter.lanes=$(LANES))
+SIM_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) --module $(MODULE) $(WAVES_ARG) \
+           $(GATE_ARG) $(if $(SEED),--seed $(SEED))
+RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) --steps $(STEPS) \
+           --particles $(PARTICLES) $(WAVES_ARG) $(GATE_ARG) $(if $(SEED),--seed $(SEED)) \
+           --plot build/plots --json build/sim-$(CONFIG).json
+HW_ARGS  = --config $(CONFIG) $(LANES_ARG) $(if $(MODULE),--module $(MODULE))
 
-.PHONY: all venv sim test regress bench lint waves rtl list clean distclean help
+.PHONY: all venv sim test regress bench synth timing lint waves rtl list clean distclean help
 
 all: test
 
@@ -41,6 +49,8 @@ help:
 	@sed -n '2,4p' Makefile
 	@echo "  make sim [CONFIG=bot|uav] [SIM=icarus|verilator] [STEPS=50] [PARTICLES=1024] [SEED=n]"
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
+	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
+	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=]"
 	@echo "  make regress | make bench"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
@@ -61,6 +71,12 @@ test: $(STAMP)
 
 regress: $(STAMP)
 	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py
+
+synth: $(STAMP)
+	$(BIN)/gpf synth $(HW_ARGS)
+
+timing: $(STAMP)
+	$(BIN)/gpf timing $(HW_ARGS)
 
 bench: $(STAMP)
 	$(BIN)/python -m gpf.bench

@@ -1,7 +1,9 @@
-"""`make bench`: cycles per dependent filter step over N x LANES, beside the published design,
-and simulation speed (particles checked per second) on Verilator and Icarus.
+"""`make bench`: cycles per dependent filter step over N x LANES, beside the published design;
+area (Yosys, xc7) beside seed 002's; Fmax (nextpnr-ecp5) and so time per step in microseconds
+beside seed 003's; simulation speed (particles checked per second) on Verilator and Icarus.
 
-Numbers come from the RTL under cocotb (gpf run's machinery), each run checked bit-exactly.
+Cycle numbers come from the RTL under cocotb (gpf run's machinery), each run checked
+bit-exactly; area and clock from gpf.synth and gpf.timing on the same generated RTL.
 """
 
 from __future__ import annotations
@@ -14,6 +16,10 @@ from gpf.config import load_config
 from gpf.run import RunArgs, run_filter
 
 SEED003_CYCLES = 3160       # seed 003's HLS design at N = 2048: 31.6 us at 100 MHz
+SEED003_US = 31.6
+# seed 002's whole GPF (uav, N = 2048, 24-bit words, Zynq 7z020), its Table of resources
+SEED002_AREA = {"LUT": 10764, "FF": 16767, "DSP48E1": 89, "BRAM36": 6}
+TIMING_MINUTES = 30         # a whole filter's place and route; past it, no Fmax is claimed
 BUDGET = 256                # SPEC 9: N / LANES + 256
 PARTICLES = (512, 1024, 2048)
 LANES = (1, 2, 4)
@@ -62,12 +68,53 @@ def speed_table(config: str = "bot", particles: int = 1024, steps: int = 4
     return lines, speed
 
 
+def area_table(configs: tuple[str, ...] = ("bot", "uav")) -> tuple[list[str], dict]:
+    from gpf.synth import COLUMNS, format_area, synthesize
+
+    cfgs = [load_config(f"configs/{c}.toml") for c in configs]
+    areas = [synthesize(cfg, f"gpf_{cfg.app}") for cfg in cfgs]
+    lines = ["area, Yosys synth_xilinx -family xc7, LANES 1, per block:", ""]
+    lines += format_area(areas)
+    lines.append("| seed 002 (uav, N = 2048, 24-bit) | 1 | whole GPF | " + " | ".join(
+        f"{SEED002_AREA[c]}" if c in SEED002_AREA else "-" for c in COLUMNS) + " | |")
+    return lines, {a.config: a.to_json() for a in areas}
+
+
+def clock_table(cycles: dict[str, dict]) -> tuple[list[str], dict]:
+    """Fmax of each whole filter at LANES 1 on the ECP5, and time per step at N = 2048."""
+    from gpf.synth import SynthError
+    from gpf.timing import place_and_route
+
+    lines = ["clock, nextpnr-ecp5 (LFE5U-85F, out of context), LANES 1; time per step at "
+             f"N = 2048 = clocks / Fmax (seed 003: {SEED003_US} us):", "",
+             "| config | Fmax MHz | critical path | clocks per step | us per step | "
+             "vs seed 003 |", "|---|---|---|---|---|---|"]
+    out = {}
+    for config, rows in cycles.items():
+        cfg = load_config(f"configs/{config}.toml")
+        clocks = rows[2048][1]
+        try:
+            t = place_and_route(cfg, f"gpf_{cfg.app}", timeout=TIMING_MINUTES * 60)
+        except SynthError as exc:
+            lines.append(f"| {config} | - ({str(exc)[:60]}) | | {clocks} | - | - |")
+            continue
+        us = clocks / t.fmax_mhz
+        out[config] = {**t.to_json(), "clocks": clocks, "us_per_step": round(us, 2)}
+        lines.append(f"| {config} | {t.fmax_mhz:.1f} | {t.path_from} -> {t.path_to} | "
+                     f"{clocks} | {us:.1f} | {SEED003_US / us:.2f}x |")
+    return lines, out
+
+
 def main(out: Path = Path("build/bench.json")) -> int:
     report: dict[str, Any] = {}
     for config in ("bot", "uav"):
         lines, rows = cycles_table(config)
         report[config] = rows
         print("\n".join(lines), "\n", flush=True)
+    lines, report["area"] = area_table()
+    print("\n".join(lines), "\n", flush=True)
+    lines, report["clock"] = clock_table({c: report[c] for c in ("bot", "uav")})
+    print("\n".join(lines), "\n", flush=True)
     lines, speed = speed_table()
     report["particles_per_second"] = speed
     print("\n".join(lines))

@@ -308,9 +308,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
     module = _module(module, cfg)
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
-    print(f"gpf sim: {module} on {args.sim}, config {cfg.name}{note}", flush=True)
+    gate = " gate-level netlist" if args.gate else ""
+    print(f"gpf sim: {module}{gate} on {args.sim}, config {cfg.name}{note}", flush=True)
+    if args.gate:
+        from gpf.synth import yosys_command
+
+        yosys_command()
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
-                     testcase=args.testcase)
+                     testcase=args.testcase, gate=args.gate)
     status = "PASSED" if result.passed else "FAILED"
     print(f"gpf sim: {module} on {args.sim}, config {cfg.name}: {result.tests - result.failed}"
           f"/{result.tests} tests passed, seed {result.seed} -> {status}")
@@ -319,7 +324,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(f"  waves:   {result.waves} (make waves MODULE={module} CONFIG={args.config})")
     if not result.passed:
         print(f"  replay:  make sim MODULE={module} CONFIG={args.config} SIM={args.sim} "
-              f"SEED={result.seed}")
+              f"SEED={result.seed}" + (" GATE=1" if args.gate else ""))
     return 0 if result.passed else EXIT_FAILED
 
 
@@ -359,7 +364,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     # here, not in the simulation's thread: a missing tool is one line, not a traceback
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
-    res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves))
+    if args.gate:
+        from gpf.synth import yosys_command
+
+        yosys_command()
+    res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves,
+                                  args.gate))
     if args.plot:
         res["plots"] = plot(res, cfg, Path(args.plot))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -403,6 +413,69 @@ def cmd_list(args: argparse.Namespace) -> int:
 
     for name in MODULES:
         print(name)
+    return 0
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    import json
+
+    from gpf.synth import SynthError, format_area, synthesize, yosys_command
+
+    cfg = _rtl_config(args)
+    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    out = _out_file("--json", args.json) if args.json else None
+    _build_dir(cfg)
+    yosys_command()     # installed, before the long part starts
+    print(f"gpf synth: {module}, config {cfg.name}, LANES {cfg.lanes}: Yosys synth_xilinx "
+          "-family xc7 (a whole filter takes minutes)", flush=True)
+    try:
+        area = synthesize(cfg, module)
+    except SynthError as exc:
+        print(f"gpf synth: FAILED: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_FAILED
+    for line in format_area([area]):
+        print(line)
+    for warning in area.warnings:
+        print(f"  yosys: {warning}")
+    report = area.log.parent / "area.json"
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(area.to_json(), indent=1) + "\n")
+        report = out
+    print(f"  -> {report} (log: {area.log})")
+    return 0
+
+
+def cmd_timing(args: argparse.Namespace) -> int:
+    import json
+
+    from gpf.synth import SynthError, yosys_command
+    from gpf.timing import nextpnr_command, place_and_route
+
+    if not 1 <= args.freq <= 1000:
+        raise UsageError(f"--freq {args.freq:g}: must lie in [1, 1000] MHz")
+    cfg = _rtl_config(args)
+    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    _build_dir(cfg)
+    yosys_command()
+    nextpnr_command()
+    print(f"gpf timing: {module}, config {cfg.name}, LANES {cfg.lanes}: synth_ecp5 + "
+          f"nextpnr-ecp5 (LFE5U-85F, out of context, target {args.freq:g} MHz); a whole filter "
+          "takes tens of minutes", flush=True)
+    try:
+        t = place_and_route(cfg, module, target_mhz=args.freq,
+                            timeout=args.timeout * 60 if args.timeout else None)
+    except SynthError as exc:
+        print(f"gpf timing: FAILED: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_FAILED
+    report = t.log.parent / "timing.json"
+    report.write_text(json.dumps(t.to_json(), indent=1) + "\n")
+    print(f"  Fmax {t.fmax_mhz:.1f} MHz (target {t.target_mhz:g}: "
+          f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
+    print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_levels} logic levels")
+    used = ", ".join(f"{k} {u}/{a}" for k, (u, a) in t.utilisation.items())
+    print(f"  ECP5 use: {used}")
+    print(f"  -> {report} ({t.seconds:.0f} s; log: {t.log})")
     return 0
 
 
@@ -470,6 +543,8 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
+    p.add_argument("--gate", action="store_true",
+                   help="simulate the synthesized gate-level netlist (Yosys) instead of the RTL")
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("run", help="the whole filter in RTL, every particle checked against "
@@ -485,7 +560,26 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--plot", metavar="DIR", help="write PNGs of the estimates there")
     p.add_argument("--json", required=True, metavar="OUT")
+    p.add_argument("--gate", action="store_true",
+                   help="simulate the synthesized gate-level netlist (Yosys) instead of the RTL")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("synth", help="area of a block or a whole filter: Yosys synth_xilinx "
+                       "(xc7), per block, as JSON")
+    with_config(p)
+    p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
+    p.add_argument("--json", metavar="OUT",
+                   help="also write the report here (always: build/<config>/synth/<module>/"
+                   "area.json)")
+    p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser("timing", help="Fmax and critical path on an ECP5 (Yosys synth_ecp5, "
+                       "nextpnr-ecp5)")
+    with_config(p)
+    p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
+    p.add_argument("--freq", type=float, default=125.0, help="target clock, MHz (default 125)")
+    p.add_argument("--timeout", type=float, help="give up after this many minutes")
+    p.set_defaults(func=cmd_timing)
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")
     p.add_argument("--config", action="append", default=[],

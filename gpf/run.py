@@ -25,6 +25,7 @@ class RunArgs:
     scenario: str | None
     sim: str
     waves: bool
+    gate: bool = False      # the synthesized netlist instead of the RTL
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
@@ -32,7 +33,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     """Run gpf_<app>'s test_filter with these settings; return its results with the run's
     settings, wall time and speed added."""
     module = f"gpf_{cfg.app}"
-    work = (build_root / cfg.name / args.sim / module).resolve()
+    work = (build_root / cfg.name / (f"{args.sim}-gate" if args.gate else args.sim)
+            / module).resolve()
     work.mkdir(parents=True, exist_ok=True)
     out, progress_file = work / "run.json", work / "progress"
     for stale in (out, progress_file):
@@ -41,13 +43,13 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
             "scenario": str(Path(args.scenario).resolve()) if args.scenario and
             args.scenario.endswith(".csv") else args.scenario,
             "out": str(out), "progress": str(progress_file)}
-    log = build_root / cfg.name / f"{module}-{args.sim}.log"
+    log = build_root / cfg.name / f"{module}-{args.sim}{'-gate' if args.gate else ''}.log"
     result: dict[str, Any] = {}
 
     def simulate() -> None:
         result["sim"] = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                                 testcase="test_filter", extra_env={"GPF_RUN": json.dumps(spec)},
-                                log_file=log, build_root=build_root)
+                                log_file=log, build_root=build_root, gate=args.gate)
 
     start = time.monotonic()
     worker = threading.Thread(target=simulate, daemon=True)
@@ -69,7 +71,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                            f"failed): see {log}")
     res = json.loads(out.read_text())
     wall = time.monotonic() - start
-    res.update(sim=args.sim, total_seconds=round(wall, 2), passed=sim.passed, log=str(log),
+    res.update(sim=args.sim + (" gate-level" if args.gate else ""),
+               total_seconds=round(wall, 2), passed=sim.passed, log=str(log),
                particles_per_second=round(res["particles_checked"] / res["wall_seconds"], 1),
                waves=str(sim.waves) if sim.waves else None)
     return res

@@ -122,13 +122,16 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
             seed: int | None = None, testcase: str | None = None,
             extra_env: dict[str, str] | None = None,
             template_dir: Path | None = None, build_root: Path = Path("build"),
-            log_file: Path | None = None, verilator_opt: str | None = None) -> SimResult:
+            log_file: Path | None = None, verilator_opt: str | None = None,
+            gate: bool = False, netlist: Path | None = None) -> SimResult:
     """Generate the RTL, build it for `sim` and run the module's cocotb tests.
 
     `template_dir` and `build_root` let a test simulate mutated templates out of the way.
     With `log_file` the simulator's output goes there instead of the terminal.
     `verilator_opt`: the model's C++ optimisation (GPF_VERILATOR_OPT, if set, wins; default
     VERILATOR_OPT): -O0 where the build costs more than the run.
+    `gate`: simulate the module's synthesized netlist (gpf.synth.gate_netlist), or `netlist`
+    if given, with the same testbench and model.
     """
     if module not in MODULES:
         raise ValueError(f"unknown module {module!r}: choose one of {', '.join(MODULES)}")
@@ -144,7 +147,14 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     config_dir = (build_root / cfg.name).resolve()
     # every module, so the manifest is whole whichever module runs (runs share the folder)
     generated = generate(cfg, config_dir / "rtl", template_dir=template_dir or TEMPLATE_DIR)
-    build_dir = config_dir / sim / module
+    sources = generated.files[module]
+    gate = gate or netlist is not None
+    if gate:
+        from gpf.synth import gate_netlist
+
+        sources = [netlist or gate_netlist(cfg, module, build_root)]
+    # a mutant's netlist (gate-mutant/) builds beside the real one's (gate/)
+    build_dir = config_dir / (f"{sim}-{sources[0].parent.parent.name}" if gate else sim) / module
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
     runner = get_runner(sim)
@@ -155,13 +165,20 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         build_args = ["--output-split", "0", "--output-split-cfuncs", "0"]
         if waves:
             build_args += ["--trace-fst", "--trace-structs"]
-    opt = os.environ.get("GPF_VERILATOR_OPT") or verilator_opt or VERILATOR_OPT
+        if gate:
+            # a netlist's bit-blasted vectors look circular to Verilator: a speed warning only
+            # (Yosys `check -assert` has already refused real combinational loops). Every flop
+            # starts random, as hardware does: a design that leans on an initial value fails.
+            build_args += ["-Wno-UNOPTFLAT", "--x-assign", "unique", "--x-initial", "unique"]
+    # a netlist's C++ is many times the RTL's: -O1 took g++ over 5 min and 4 GB on moments
+    opt = os.environ.get("GPF_VERILATOR_OPT") or verilator_opt or ("-O0" if gate
+                                                                    else VERILATOR_OPT)
     if sim == "verilator":
         _forget_objects_built_otherwise(build_dir, opt)
         runtime = _runtime_cache(build_args)
     variables = _runtime_variables(runtime) if sim == "verilator" else {}
     with _make_variables(OPT_FAST=opt, **variables):
-        runner.build(sources=generated.files[module], hdl_toplevel=top, build_dir=build_dir,
+        runner.build(sources=sources, hdl_toplevel=top, build_dir=build_dir,
                      always=True, waves=waves, build_args=build_args,
                      timescale=("1ns", "1ps"), log_file=log_file)
     if sim == "verilator":
@@ -182,7 +199,10 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
             test_module=test_module(module), hdl_toplevel=top, test_dir=build_dir,
             build_dir=build_dir, seed=seed, testcase=testcase, waves=waves,
             test_args=["--trace-file", str(waves_file)] if waves and sim == "verilator" else [],
-            plusargs=[f"+dumpfile_path={waves_file}"] if waves and sim == "icarus" else [],
+            plusargs=([f"+dumpfile_path={waves_file}"] if waves and sim == "icarus" else [])
+            # the flops' random start follows the run's seed (0 would mean the clock's)
+            + (["+verilator+rand+reset+2", f"+verilator+seed+{1 + seed % 0x7FFFFFFE}"]
+               if gate and sim == "verilator" else []),
             extra_env=env, results_xml=str(build_dir / "results.xml"), log_file=log_file)
     finally:
         if hidden is not None:

