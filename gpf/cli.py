@@ -472,7 +472,8 @@ def cmd_timing(args: argparse.Namespace) -> int:
     report.write_text(json.dumps(t.to_json(), indent=1) + "\n")
     print(f"  Fmax {t.fmax_mhz:.1f} MHz (target {t.target_mhz:g}: "
           f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
-    print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_levels} logic levels")
+    print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_cells} logic cells "
+          "(each of a carry chain counts)")
     used = ", ".join(f"{k} {u}/{a}" for k, (u, a) in t.utilisation.items())
     print(f"  ECP5 use: {used}")
     print(f"  -> {report} ({t.seconds:.0f} s; log: {t.log})")

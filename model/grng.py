@@ -36,7 +36,7 @@ LFSR258 = (
 SEED_FORCE_BIT = (1, 9, 12, 17, 23)
 COMPONENTS = len(LFSR258)
 
-LATENCY = 6  # clocks from a uniform draw to its normal sample at the output register
+LATENCY = 11  # clocks from a uniform draw to its normal sample at the output register
 
 
 def splitmix64(x: int) -> tuple[int, int]:

@@ -112,6 +112,10 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "s2_w": s2_w,
         "rom_w": rom_w,
         "rom": rom,
+        # bit b of the leading-zero count of p (u0.63) is set where the leading one sits at a
+        # position i whose count 62 - i has bit b
+        "lzc_masks": [f"{sum(1 << i for i in range(63) if (62 - i) >> b & 1):016X}"
+                      for b in range(6)],
     }
 
 
@@ -125,7 +129,7 @@ def exp_context(cfg: Config) -> dict[str, Any]:
     rom = [f"{(_twos(slope, e.slope_width) << m_width) | base:0{(rom_width + 3) // 4}X}"
            for base, slope in zip(e.base, e.slope, strict=False)]
     return {
-        "lanes": cfg.lanes, "latency": 4,
+        "lanes": cfg.lanes, "latency": 7,
         "in_width": e.in_width, "in_frac": e.in_frac, "out_width": e.out_frac + 1,
         "t_fmt": str(dp.t), "w_fmt": str(dp.weight),
         "lut_bits": e.lut_bits, "rem_bits": e.rem_bits, "guard_bits": e.guard_bits,

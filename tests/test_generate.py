@@ -12,6 +12,7 @@ import jinja2
 import pytest
 
 from gpf.config import load_config
+from gpf.model import grng as grng_model
 from gpf.model.grng import GrngModel
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
 from gpf.rtl.lint import lint_files
@@ -36,7 +37,7 @@ def test_header_filelist_manifest(tmp_path: Path) -> None:
     assert (tmp_path / "grng.f").read_text().split() == [p.name for p in out.files["grng"]]
     manifest = json.loads((tmp_path / "manifest.json").read_text())
     assert manifest["formats"]["quaternion"] == str(cfg.formats["quaternion"])
-    assert manifest["modules"]["grng"]["latency"] == 6
+    assert manifest["modules"]["grng"]["latency"] == grng_model.LATENCY
     assert manifest["modules"]["grng"]["constants"]["coef_frac"] == 20
     assert (tmp_path / "config.toml").read_text() == Path("configs/uav.toml").read_text()
 
