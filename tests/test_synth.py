@@ -99,6 +99,15 @@ def test_gate_level_netlist_passes_and_one_inverted_gate_fails(tmp_path: Path) -
     assert not bad.passed, "a netlist with an inverted gate passed its testbench"
 
 
+def test_weight_netlist_equals_the_model(tmp_path: Path) -> None:
+    """The netlist that once differed from its RTL: Yosys 0.70 read -PW'(1 <<< k) as +2^k, and
+    every whitened u saturated (rtl/templates/_weight.sv.j2, U_MIN)."""
+    result = run_sim(load_config("configs/bot.toml"), "weight_bot", "verilator", gate=True,
+                     seed=4, build_root=tmp_path, log_file=tmp_path / "gate.log",
+                     extra_env={"GPF_FAIL_FAST": "1", "TEST_LEVEL": "short"})
+    assert result.passed, (tmp_path / "gate.log").read_text()[-3000:]
+
+
 def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path, capsys,
                                                    monkeypatch) -> None:
     from gpf.timing import place_and_route
