@@ -109,7 +109,8 @@ def run_yosys(script: str, folder: Path, timeout: float | None = None) -> Path:
     return log
 
 
-def _sources(cfg: Config, module: str, build_root: Path) -> list[Path]:
+def rtl_files(cfg: Config, module: str, build_root: Path) -> list[Path]:
+    """The module's generated SystemVerilog (generated now, as a simulation would)."""
     generated = generate(cfg, (build_root / cfg.name / "rtl").resolve())
     return generated.files[module]
 
@@ -120,7 +121,8 @@ def rel(path: Path, folder: Path) -> str:
     return os.path.relpath(Path(path).resolve(), Path(folder).resolve())
 
 
-def _read(files: list[Path], folder: Path) -> str:
+def read_sources(files: list[Path], folder: Path) -> str:
+    """The Yosys command that reads `files`, for a script run in `folder`."""
     return "read_verilog -sv " + " ".join(rel(f, folder) for f in files) + "\n"
 
 
@@ -183,7 +185,7 @@ def synthesize(cfg: Config, module: str, build_root: Path = Path("build"),
                timeout: float | None = None) -> Area:
     """synth_xilinx on `module` of `cfg`; writes area.json beside Yosys's log and stat."""
     folder = (build_root / cfg.name / "synth" / module).resolve()
-    files = _sources(cfg, module, build_root)
+    files = rtl_files(cfg, module, build_root)
     area = synth_files(files, MODULES[module].top, folder, timeout)
     area = dataclasses.replace(area, module=module, config=cfg.name, lanes=cfg.lanes)
     (folder / "area.json").write_text(json.dumps(area.to_json(), indent=1) + "\n")
@@ -194,7 +196,7 @@ def synth_files(files: list[Path], top: str, folder: Path,
                 timeout: float | None = None) -> Area:
     """synth_xilinx on Verilog files; raises SynthError on a design problem."""
     stat_file = folder / "stat.json"
-    script = (_read(files, folder)
+    script = (read_sources(files, folder)
               + f"hierarchy -check -top {top}\n"
               + "synth_xilinx -family xc7 -noiopad -noclkbuf\n"
               + "check -assert\n"
@@ -222,9 +224,9 @@ def gate_netlist(cfg: Config, module: str, build_root: Path = Path("build"),
     model here. `mutation`: Yosys commands run before writing (a deliberately broken gate)."""
     top = MODULES[module].top
     folder = (build_root / cfg.name / ("gate-mutant" if mutation else "gate") / module).resolve()
-    files = _sources(cfg, module, build_root)
+    files = rtl_files(cfg, module, build_root)
     netlist = folder / "netlist.v"
-    script = (_read(files, folder)
+    script = (read_sources(files, folder)
               + f"hierarchy -check -top {top}\n"
               + "synth -flatten -top " + top + "\n"
               + "check -assert\n"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from gpf.config import Config
 from gpf.rtl.generate import MODULES
-from gpf.synth import SynthError, _read, _sources, design_problems, run_yosys
+from gpf.synth import SynthError, design_problems, read_sources, rtl_files, run_yosys
 from gpf.toolchain import ToolchainError
 
 DEVICE = ("--85k", "--package", "CABGA381")
@@ -56,7 +56,7 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
     folder = (build_root / cfg.name / "timing" / module).resolve()
     netlist, report, log = folder / "netlist.json", folder / "report.json", folder / "nextpnr.log"
     start = time.monotonic()
-    ylog = run_yosys(_read(_sources(cfg, module, build_root), folder)
+    ylog = run_yosys(read_sources(rtl_files(cfg, module, build_root), folder)
                      + f"hierarchy -check -top {top}\n"
                      + f"synth_ecp5 -top {top} -json {netlist.name}\n", folder)
     problems, _ = design_problems(ylog.read_text())
