@@ -295,6 +295,21 @@ def _module(name: str, cfg) -> str:
     return name
 
 
+def _check_gate_tools(gate: bool) -> None:
+    """A gate-level run needs Yosys: said before any build, in one line."""
+    if gate:
+        from gpf.synth import yosys_command
+
+        yosys_command()
+
+
+def _hw_target(args: argparse.Namespace):
+    """`gpf synth` and `gpf timing`: the config, the module (default: the whole filter)."""
+    cfg = _rtl_config(args)
+    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    return cfg, module
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     from gpf.sim import run_sim
 
@@ -310,10 +325,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     _build_dir(cfg)
     gate = " gate-level netlist" if args.gate else ""
     print(f"gpf sim: {module}{gate} on {args.sim}, config {cfg.name}{note}", flush=True)
-    if args.gate:
-        from gpf.synth import yosys_command
-
-        yosys_command()
+    _check_gate_tools(args.gate)
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                      testcase=args.testcase, gate=args.gate)
     status = "PASSED" if result.passed else "FAILED"
@@ -364,10 +376,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # here, not in the simulation's thread: a missing tool is one line, not a traceback
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
-    if args.gate:
-        from gpf.synth import yosys_command
-
-        yosys_command()
+    _check_gate_tools(args.gate)
     res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves,
                                   args.gate))
     if args.plot:
@@ -421,8 +430,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     from gpf.synth import SynthError, format_area, synthesize, yosys_command
 
-    cfg = _rtl_config(args)
-    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    cfg, module = _hw_target(args)
     out = _out_file("--json", args.json) if args.json else None
     _build_dir(cfg)
     yosys_command()     # installed, before the long part starts
@@ -454,8 +462,7 @@ def cmd_timing(args: argparse.Namespace) -> int:
 
     if not 1 <= args.freq <= 1000:
         raise UsageError(f"--freq {args.freq:g}: must lie in [1, 1000] MHz")
-    cfg = _rtl_config(args)
-    module = _module(args.module or f"gpf_{cfg.app}", cfg)
+    cfg, module = _hw_target(args)
     _build_dir(cfg)
     yosys_command()
     nextpnr_command()
@@ -497,6 +504,10 @@ def build_parser() -> Parser:
                        help="config name in configs/ or a TOML path (default: bot)")
         p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                        help="override one config value, e.g. filter.lanes=2 (repeatable)")
+
+    def with_gate(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--gate", action="store_true", help="simulate the synthesized "
+                       "gate-level netlist (Yosys) instead of the RTL")
 
     p = sub.add_parser("generate", help="write the SystemVerilog, file lists and manifest")
     with_config(p)
@@ -544,8 +555,7 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
-    p.add_argument("--gate", action="store_true",
-                   help="simulate the synthesized gate-level netlist (Yosys) instead of the RTL")
+    with_gate(p)
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("run", help="the whole filter in RTL, every particle checked against "
@@ -561,8 +571,7 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--plot", metavar="DIR", help="write PNGs of the estimates there")
     p.add_argument("--json", required=True, metavar="OUT")
-    p.add_argument("--gate", action="store_true",
-                   help="simulate the synthesized gate-level netlist (Yosys) instead of the RTL")
+    with_gate(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("synth", help="area of a block or a whole filter: Yosys synth_xilinx "

@@ -14,7 +14,7 @@ from typing import Any
 from tqdm import tqdm
 
 from gpf.config import Config
-from gpf.sim import run_sim
+from gpf.sim import run_sim, sim_build_dir
 
 
 @dataclass(frozen=True)
@@ -33,8 +33,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     """Run gpf_<app>'s test_filter with these settings; return its results with the run's
     settings, wall time and speed added."""
     module = f"gpf_{cfg.app}"
-    work = (build_root / cfg.name / (f"{args.sim}-gate" if args.gate else args.sim)
-            / module).resolve()
+    work = sim_build_dir((build_root / cfg.name).resolve(), args.sim, module,
+                         "gate" if args.gate else None)
     work.mkdir(parents=True, exist_ok=True)
     out, progress_file = work / "run.json", work / "progress"
     for stale in (out, progress_file):

@@ -114,6 +114,11 @@ def _keep_runtime(cache: Path, build_dir: Path) -> None:
         shutil.rmtree(tmp, ignore_errors=True)           # or build/ not writable: no cache
 
 
+def sim_build_dir(config_dir: Path, sim: str, module: str, netlist: str | None = None) -> Path:
+    """build/<config>/<sim>/<module>, or <sim>-<netlist kind>/ for a netlist (gate, gate-mutant)."""
+    return config_dir / (f"{sim}-{netlist}" if netlist else sim) / module
+
+
 def test_module(module: str) -> str:
     return MODULES[module].testbench or f"gpf.tb.{module}.test_{module}"
 
@@ -154,7 +159,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
 
         sources = [netlist or gate_netlist(cfg, module, build_root)]
     # a mutant's netlist (gate-mutant/) builds beside the real one's (gate/)
-    build_dir = config_dir / (f"{sim}-{sources[0].parent.parent.name}" if gate else sim) / module
+    build_dir = sim_build_dir(config_dir, sim, module,
+                              sources[0].parent.parent.name if gate else None)
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
     runner = get_runner(sim)

@@ -92,8 +92,9 @@ def yosys_command() -> list[str]:
     return [found]
 
 
-def run_yosys(script: str, folder: Path, timeout: float | None = None) -> Path:
-    """Run a Yosys script in `folder`; the log is yosys.log there. Raises SynthError."""
+def run_yosys(script: str, folder: Path, timeout: float | None = None) -> tuple[Path, list[str]]:
+    """Run a Yosys script in `folder` (log: yosys.log there); return the log and the warnings
+    that are not design problems. A failure or a design problem raises SynthError."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "yosys.ys").write_text(script)
     log = folder / "yosys.log"
@@ -101,12 +102,14 @@ def run_yosys(script: str, folder: Path, timeout: float | None = None) -> Path:
     run = subprocess.run([*yosys_command(), "-q", "-l", "yosys.log", "-s", "yosys.ys"],
                          capture_output=True, text=True, timeout=timeout, cwd=folder)
     text = log.read_text() if log.exists() else ""
+    problems, others = design_problems(text)
     if run.returncode or "End of script." not in text:
         errors = [line for line in (text + run.stderr).splitlines() if "ERROR" in line]
-        problems, _ = design_problems(text)
         raise SynthError(f"yosys failed ({errors[0].strip() if errors else 'no ERROR line'})"
                          + "".join(f"; {p}" for p in problems) + f"; log: {log}")
-    return log
+    if problems:
+        raise SynthError("design problems: " + "; ".join(problems) + f" (log: {log})")
+    return log, others
 
 
 def rtl_files(cfg: Config, module: str, build_root: Path) -> list[Path]:
@@ -203,15 +206,12 @@ def synth_files(files: list[Path], top: str, folder: Path,
               + f"tee -q -o {stat_file.name} stat -json -tech xilinx -top {top}\n")
     start = time.monotonic()
     stat_file.unlink(missing_ok=True)
-    log = run_yosys(script, folder, timeout)
+    log, others = run_yosys(script, folder, timeout)
     seconds = time.monotonic() - start
-    problems, others = design_problems(log.read_text())
     stat = json.loads(stat_file.read_text())
     latches = {c: n for c, n in flat_cells(top, _own_counts(stat)).items() if c in LATCHES}
     if latches:
-        problems.append(f"latches inferred: {latches}")
-    if problems:
-        raise SynthError(f"{top}: design problems: " + "; ".join(problems) + f" (log: {log})")
+        raise SynthError(f"{top}: design problems: latches inferred: {latches} (log: {log})")
     total, blocks = area_from_stat(stat, top)
     return Area(top, top, "", 1, total, blocks, others, seconds, log)
 
@@ -238,11 +238,7 @@ def gate_netlist(cfg: Config, module: str, build_root: Path = Path("build"),
     if netlist.exists() and stamp.exists() and stamp.read_text() == key:
         return netlist     # the same RTL and script: the netlist is current
     netlist.unlink(missing_ok=True)
-    log = run_yosys(script, folder)
-    problems, _ = design_problems(log.read_text())
-    if problems:
-        raise SynthError(f"{module} ({cfg.name}): design problems: " + "; ".join(problems)
-                         + f" (log: {log})")
+    run_yosys(script, folder)
     stamp.write_text(key)
     return netlist
 

@@ -108,8 +108,7 @@ def test_weight_netlist_equals_the_model(tmp_path: Path) -> None:
     assert result.passed, (tmp_path / "gate.log").read_text()[-3000:]
 
 
-def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path, capsys,
-                                                   monkeypatch) -> None:
+def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path) -> None:
     from gpf.timing import place_and_route
 
     t = place_and_route(load_config("configs/bot.toml"), BLOCK, build_root=tmp_path)
