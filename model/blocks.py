@@ -20,7 +20,6 @@ from gpf.model.fixed import Format, saturate, shift_round
 from gpf.model.formats import (
     CHOL_FLOOR_LSB,
     CHOL_FLOOR_REL_BITS,
-    INV_GUARD,
     SHIFT_BITS,
     Const,
     Datapath,
@@ -539,7 +538,8 @@ def _obj(a: Any) -> np.ndarray:
 def cholesky_batch(dp: Datapath, sigma: np.ndarray, pairs: list[tuple[int, int]]
                    ) -> tuple[np.ndarray, np.ndarray]:
     """L with Sigma = L L^T for R matrices at once: sigma (R, P) raw in the pairs' order; n
-    square roots, n reciprocals, exact integer arithmetic. Returns L (R, n, n) and flags (R,).
+    square roots and one exactly rounded quotient per L_ij below the diagonal, exact integer
+    arithmetic. Returns L (R, n, n) and flags (R,).
 
     A pivot below max((CHOL_FLOOR_LSB LSB of L)^2, Sigma_jj 2^-CHOL_FLOOR_REL_BITS) is raised
     to that floor and its column below the diagonal set to 0 (flag NOT_PD): the filter keeps a
@@ -563,14 +563,12 @@ def cholesky_batch(dp: Datapath, sigma: np.ndarray, pairs: list[tuple[int, int]]
         ljj, f = saturate(sqrt_round(d, 2 * fj, fj), dp.chol[j])
         chol[j][j] = _obj(ljj)
         flags |= np.where(f, np.int64(Flag.SAT), np.int64(0))
-        inv = _obj(div_round(1, ljj, 2 * fj + INV_GUARD))        # 1/L_jj, fraction fj + G
         for i in range(j + 1, n):
             if (i, j) not in col:
                 continue
             num = col[(i, j)] - sum((chol[i][k] * chol[j][k] for k in range(j)), _obj(0))
-            # num: fraction fi + fj; inv: fj + G; L_ij: fi
-            half = 1 << (2 * fj + INV_GUARD - 1)
-            value, f = saturate((num * inv + half) >> (2 * fj + INV_GUARD), dp.chol[i])
+            # num: fraction fi + fj; L_jj: fj; L_ij = round(num / L_jj): fi, one exact rounding
+            value, f = saturate(_obj(div_round(num, ljj, 0)), dp.chol[i])
             chol[i][j] = _obj(np.where(floored, 0, value))
             flags |= np.where(f & ~floored, np.int64(Flag.SAT), np.int64(0))
     out = np.array([[[int(chol[i][j][r]) for j in range(n)] for i in range(n)]

@@ -193,7 +193,8 @@ def sqrt_context(cfg: Config) -> dict[str, Any]:
 
 
 def recip_context(cfg: Config) -> dict[str, Any]:
-    """round(2^(2F+G) / L) = div_round(1, L, 2F + G): 1/L_jj with F + G fraction bits.
+    """round(2^(2F+G) / L) = div_round(1, L, 2F + G): a fully pipelined reciprocal of an L_jj-like
+    word with F + G fraction bits (a library block: the Cholesky divides each row directly).
 
     L is the sqrt block's output format (unsigned W - 1 bits, fraction F, from dp.chol[0]),
     G = INV_GUARD. The result is largest at the smallest valid input, L = 1: 2^(2F+G), so
@@ -665,57 +666,79 @@ def cholesky_pairs(cfg: Config) -> list[tuple[int, int]]:
     return cov_pairs(datapath(cfg), cfg.app_params.get("covariance", "full"))
 
 
-CHOL_DIGITS = 8   # root digits and quotient bits per clock in the Cholesky
+def diagonal_blocks(n: int, pairs: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The covariance's diagonal blocks as (first row, size): rows joined by a kept pair belong
+    to one block, and every pair inside a block must be kept (each block is a full Cholesky)."""
+    blocks: list[tuple[int, int]] = []
+    start = 0
+    for i in range(1, n + 1):
+        if i == n or not any((i, j) in pairs for j in range(start, i)):
+            blocks.append((start, i - start))
+            start = i
+    kept = {(i, j) for s, m in blocks for i in range(s, s + m) for j in range(s, i + 1)}
+    if kept != set(pairs):
+        raise ValueError("cholesky: the covariance pairs are not whole diagonal blocks")
+    return blocks
 
 
 def cholesky_context(cfg: Config) -> dict[str, Any]:
-    """Serial L = chol(Sigma) (model: gpf.model.blocks.cholesky), one matrix per beat.
+    """L = chol(Sigma) (model: gpf.model.blocks.cholesky_batch), one matrix per beat; one serial
+    core per diagonal block of the covariance (uav "block": [q] and [v] side by side).
 
-    Column j runs a fixed schedule of clocks (counter c): c = 0 the pivot d = Sigma_jj -
-    sum_k<j L_jk^2 (n - 1 multipliers in parallel), its floor and the root's radicand; from
-    c = 1 on, one a clock, the rows' dot products Sigma_ij - sum_k<j L_ik L_jk overlap SQ
-    clocks of K root digits; one clock rounds L_jj; RQ clocks of K quotient bits of
-    q = floor(2^(T+1) / L_jj) (T >= every S_j = 2 F_j + G; L_jj >= 16, so the division starts
-    from the remainder 8 with quotient 0); one clock for 1/L_jj = ((q >> (T - S_j)) + 1) >> 1
-    (floor(floor(x) / 2^k) = floor(x / 2^k): exactly round(2^S_j / L_jj)); then one clock per
-    row below (L_ij = round(num_i / L_jj)). The last column stops after L_jj; one more clock
-    loads the output register, and the next matrix is taken the clock after.
+    A core runs column j on a fixed schedule of CLOCKS[j] clocks (counter c): c = 0 .. n-1-j
+    issue the pivot and the rows' dot products Sigma_aj - sum_k<j L_ak L_jk into a pipeline of
+    P clocks (operands, products, then an adder tree of ceil(log2 n) levels); c = P floors the
+    pivot and loads the root; SQ clocks of 2 root bits (radix 4, three trial subtractions in
+    parallel); one clock rounds L_jj; one forms every row's 2 num + L_jj; QS clocks of 2
+    quotient bits of floor(|2 num + L_jj| / 2 L_jj) in one divider per row (radix 4); one
+    writes the rows: L_ij = round(num / L_jj), saturated. The last column stops after L_jj.
     """
     from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS
 
     dp = datapath(cfg)
-    n, k = dp.n, CHOL_DIGITS
+    n = dp.n
     pairs = cholesky_pairs(cfg)
+    if any(i < j for i, j in pairs):
+        raise ValueError("cholesky: pairs must be the lower triangle (i >= j)")
     w = dp.chol[0].width                        # L's word
     if any(f.width != w or not f.signed for f in dp.chol):
         raise ValueError("cholesky: every L format must be signed and one width")
-    if CHOL_FLOOR_LSB < 16:
-        raise ValueError("cholesky: the division starts from remainder 8 < L_jj")
+    if CHOL_FLOOR_LSB < 1:
+        raise ValueError("cholesky: the pivot floor must keep L_jj > 0 (the divisor)")
     sigma_w = [dp.sigma(i, j).width for i, j in pairs]
     sw = max(sigma_w)
     acc_w = max(sw, 2 * w - 1) + max(1, math.ceil(math.log2(n))) + 1
-    shifts = [2 * f.frac_bits + INV_GUARD for f in dp.chol]     # 1/L_jj = 2^S_j / L_jj
-    sq = math.ceil(w / k)                       # root digits: W (the last is the rounding one)
-    rq = math.ceil((max(shifts) - 2) / k)       # 2^(T+1) = 8 2^(T-2): T - 2 quotient bits
-    s_top = rq * k + 2
-    col = [3 + sq + rq + (n - 1 - j) for j in range(n - 1)] + [2 + sq]
-    if n - 1 > 2 + sq + rq:                     # the rows' dot products end before scaling
-        raise ValueError(f"cholesky: {n} rows do not fit the divider's schedule")
-    latency = sum(col) + 2
+    sq = math.ceil(w / 2)                       # root clocks: 2 SQ >= W root bits of 4 d
+    qs = math.ceil((w - 1) / 2)                 # quotient clocks: |L_ij| < 2^(W-1) unsaturated
+    cores = []
+    for start, size in diagonal_blocks(n, pairs):
+        terms = 1 + (size - 1) * (3 if w > 18 else 1)  # S_aj, each product whole or in parts
+        levels = max(1, math.ceil(math.log2(terms)))
+        p = 2 + levels                          # operands, products, the adder tree
+        clocks = [p + sq + qs + 5] * (size - 1) + [p + sq + 3]
+        cores.append({"start": start, "n": size, "p": p, "levels": levels,
+                      "counts": [math.ceil(terms / 2**v) for v in range(levels + 1)],
+                      "clocks": clocks, "latency": sum(clocks) + 2,
+                      "cw": max(clocks).bit_length(), "jw": max(1, (size - 1).bit_length()),
+                      "tw": max(size + 1, size * size - 1).bit_length()})
+    kinds = list({c["n"]: c for c in cores}.values())
+    latency = max(c["latency"] for c in cores)
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
     offs = [sum(sigma_w[:t]) for t in range(len(pairs))]
+    core_of = {i: c for c in cores for i in range(c["start"], c["start"] + c["n"])}
     return {
         "lanes": cfg.lanes, "latency": latency, "interval": latency,
-        "n": n, "w": w, "k": k, "sw": sw, "acc_w": acc_w, "sq": sq, "rq": rq,
-        "qw": rq * k, "s_top": s_top, "shifts": shifts, "cols": col,
-        "cw": max(col).bit_length(), "jw": max(1, (n - 1).bit_length()),
-        "tw": (n * n - 1).bit_length(),
+        "n": n, "w": w, "sw": sw, "acc_w": acc_w, "sq": sq, "qs": qs, "dg": 2 * sq,
+        "qb": 2 * qs, "cores": cores, "core_kinds": kinds,
         "floor_min": CHOL_FLOOR_LSB**2, "floor_rel_bits": CHOL_FLOOR_REL_BITS,
         "in_width": sum(sigma_w), "out_width": len(lower) * w + 3,
-        "inputs": [{"i": i, "j": j, "off": o, "w": v, "fmt": str(dp.sigma(i, j))}
+        "inputs": [{"i": i, "j": j, "off": o, "w": v, "fmt": str(dp.sigma(i, j)),
+                    "core": cores.index(core_of[i]), "a": i - core_of[i]["start"],
+                    "b": j - core_of[i]["start"]}
                    for (i, j), o, v in zip(pairs, offs, sigma_w, strict=True)],
-        "outputs": [{"i": i, "j": j, "off": t * w} for t, (i, j) in enumerate(lower)],
-        "pair_mask": [[int((i, j) in pairs) for j in range(n)] for i in range(n)],
+        "outputs": [{"i": i, "j": j, "off": t * w, "core": cores.index(core_of[i]),
+                     "a": i - core_of[i]["start"], "b": j - core_of[i]["start"],
+                     "kept": (i, j) in pairs} for t, (i, j) in enumerate(lower)],
         "chol_fmts": [str(f) for f in dp.chol],
         "covariance": cfg.app_params.get("covariance", "full"),
     }
@@ -784,7 +807,7 @@ MODULES: dict[str, Module] = {
     "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
                          uses=("exp",), apps=("uav",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
-    "cholesky": Module("cholesky", ("cholesky",), cholesky_context, laned=False),
+    "cholesky": Module("cholesky", ("cholesky_core", "cholesky"), cholesky_context, laned=False),
     "sigma_predict": Module("sigma_predict", ("sigma_predict",), sigma_predict_context,
                             laned=False),
     "cordic_atan2": Module("cordic_atan2", ("cordic_atan2_lane", "cordic_atan2"),

@@ -444,6 +444,7 @@ def weight_uav_view(cfg: Config, sim: str) -> list[Group]:
 
 def cholesky_view(cfg: Config, sim: str) -> list[Group]:
     dp = datapath(cfg)
+    core = "cholesky.u_core0"
     k = cholesky_context(cfg)
     w, f0 = k["w"], dp.chol[0].frac_bits
     sigma = [(f"Sigma_{x['i']}{x['j']}", x["off"], x["w"], dp.cov_frac(x["i"], x["j"]))
@@ -459,21 +460,17 @@ def cholesky_view(cfg: Config, sim: str) -> list[Group]:
             Trace("cholesky.m_axis_tdata", k["out_width"] - 3, k["out_width"] - 3, label="SAT"),
             Trace("cholesky.m_axis_tdata", k["out_width"] - 1, k["out_width"] - 1,
                   label="NOT_PD")]),
-        Group("schedule", [
-            _bit("cholesky.busy_q", "busy"), _bit("cholesky.fin_q", "done"),
-            Trace("cholesky.j_q", k["jw"] - 1, 0, label="column j", frac_bits=0),
-            Trace("cholesky.c_q", k["cw"] - 1, 0, label="clock c", frac_bits=0)]),
-        Group("column 0's units (fractions of column 0)", [
-            Trace("cholesky.dot", k["acc_w"] - 1, 0, label="dot unit (pivot at c = 0)",
+        Group("schedule (core 0)", [
+            _bit("cholesky.busy_q", "busy"), _bit(f"{core}.done_q", "core 0 done"),
+            Trace(f"{core}.j_q", k["cores"][0]["jw"] - 1, 0, label="column j", frac_bits=0),
+            Trace(f"{core}.c_q", k["cores"][0]["cw"] - 1, 0, label="clock c", frac_bits=0)]),
+        Group("core 0's units (fractions of column 0)", [
+            Trace(f"{core}.dot", k["acc_w"] - 1, 0, label="dot pipeline (pivot at c = P)",
                   signed=True, frac_bits=2 * f0),
-            _bit("cholesky.floored_q", "floored"),
-            Trace("cholesky.root_q", w - 1, 0, label="isqrt(4 d)", frac_bits=f0 + 1),
-            Trace("cholesky.den_q", w - 1, 0, label="L_jj", frac_bits=f0),
-            Trace("cholesky.quo_q", k["qw"] - 1, 0, label="floor(2^(S+1) / L_jj)",
-                  frac_bits=0),
-            Trace("cholesky.inv_q", k["qw"] - 1, 0, label="1/L_jj",
-                  frac_bits=k["shifts"][0] - f0),
-            _bit("cholesky.sat_q", "SAT so far"), _bit("cholesky.notpd_q", "NOT_PD so far"),
+            _bit(f"{core}.floored_q", "floored"),
+            Trace(f"{core}.root_q", w - 1, 0, label="isqrt(4 d)", frac_bits=f0 + 1),
+            Trace(f"{core}.den_q", w - 1, 0, label="L_jj", frac_bits=f0),
+            _bit(f"{core}.sat_q", "SAT so far"), _bit(f"{core}.notpd_q", "NOT_PD so far"),
         ]),
     ]
 

@@ -168,12 +168,13 @@ MUTANTS = {
     "weight-uav-sat-flag": ("weight_uav", "_weight.sv.j2",
                             "{{ name }}_full[W] != {{ name }}_full[W-1];",
                             "{{ name }}_full[W] && !{{ name }}_full[W-1];"),
-    "cholesky-floor-compare": ("cholesky", "cholesky.sv.j2", "assign floored = dot < floor_v;",
-                               "assign floored = dot <= floor_v;"),
-    "cholesky-recip-rounding": ("cholesky", "cholesky.sv.j2",
-                                "+ {{ qw + 1 }}'d1) >> 1);", "+ {{ qw + 1 }}'d0) >> 1);"),
-    "cholesky-pivot-sub": ("cholesky", "cholesky.sv.j2",
-                           "if (kk < int'(j_q)) dot = dot - ", "if (kk < int'(j_q)) dot = dot + "),
+    "cholesky-floor-compare": ("cholesky", "cholesky_core.sv.j2", "assign floored = dot < floor_q;",
+                               "assign floored = dot <= floor_q;"),
+    "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
+                               "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
+                               "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
+    "cholesky-pivot-sub": ("cholesky", "cholesky_core.sv.j2", "assign lv0[{{ 3 * k + 1 }}] = -(",
+                           "assign lv0[{{ 3 * k + 1 }}] = +("),
 }
 
 

@@ -129,7 +129,7 @@ def random_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], in
 def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]:
     """Pivots at a floor's edge (within a few LSB^2): a diagonal entry at the absolute floor
     CHOL_FLOOR_LSB^2, or (half the time) a pair a, a+1 with L_aa = x, L_(a+1)a = y exactly
-    (Sigma_aa = x^2, Sigma_(a+1)a = x y, |x|, |y| < 2^15 so the rounded 1/x gives y back) and
+    (Sigma_aa = x^2, Sigma_(a+1)a = x y, |x|, |y| < 2^15 so L_(a+1)a = round(x y / x) = y) and
     Sigma_(a+1)(a+1) = y^2 + (y^2 >> REL) + delta: a pivot at the relative floor."""
     dp, pairs = b.dp, pairs_of(b)
     fl = CHOL_FLOOR_LSB**2
@@ -271,12 +271,15 @@ async def test_latency_and_throughput(dut: SimHandleBase) -> None:
 
 @cocotb.test()
 async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
-    """Deliberately wrong model: 1/L_jj with one guard bit fewer (a different rounding)."""
+    """Deliberately wrong model: L_ij = num / L_jj rounded toward -inf instead of to nearest."""
     b = bench()
     good = cholesky_model(b)
 
+    def floor_div(num, den, shift):
+        return np.floor_divide(np.asarray(num, dtype=object) * 2**shift, den)
+
     def bad(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        with mock.patch.object(blocks, "INV_GUARD", blocks.INV_GUARD - 3):
+        with mock.patch.object(blocks, "div_round", floor_div):
             return good(seen)
 
     await check_wrong_model_caught(dut, block(b, bad), b, "cholesky-bad")

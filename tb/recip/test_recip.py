@@ -1,5 +1,6 @@
 """cocotb testbench of `recip` (inv = round(2^(2F+G) / L)): every lane of every beat against
-recip (div_round), the model of the Cholesky's 1/L_jj; L = 0 gives all ones."""
+recip (div_round); L = 0 gives all ones. (The Cholesky once used this 1/L_jj; it now divides
+each row directly.)"""
 
 from __future__ import annotations
 
