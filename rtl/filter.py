@@ -13,7 +13,7 @@ from gpf.model.formats import SHIFT_BITS, datapath
 from gpf.model.grng import COMPONENTS
 
 CYCLES_W = 32          # the step's cycle count in the output beat
-FIFO_DEPTH_LOG2 = 2    # process draws waiting beside sample_cond (its latency 2 + 1 in flight)
+FIFO_DEPTH_LOG2 = 4    # process draws waiting beside sample_cond (its latency 8 + 1 in flight)
 STEP_FIELDS = {"bot": ["z", "ox", "oy"],
                "uav": ["omega0", "omega1", "omega2", "accel0", "accel1", "accel2",
                        "v0", "v1", "v2"]}

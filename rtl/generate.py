@@ -428,21 +428,82 @@ def _round_sum_plan(terms: list[tuple[int, int, int]], out: Format) -> dict[str,
             "half": half, "out_width": out.width, "fmt": str(out)}
 
 
+def _tree_node(name: str, ops: list[dict[str, Any]]) -> dict[str, Any]:
+    """A registered sum of one or two operands, each at the common fraction (its `shift`,
+    and `low`: a constant of `low_bits` bits appended below it); its range and width."""
+    lo = sum(o["lo"] for o in ops)
+    hi = sum(o["hi"] for o in ops)
+    return {"name": name, "sig": f"{name}_q", "ops": ops, "lo": lo, "hi": hi,
+            "width": _signed_width(lo, hi), "shift": 0, "low_bits": 0, "low": 0}
+
+
+def _adder_tree(rows: list[list[dict[str, Any]]], prefix: str) -> list[list[list[dict]]]:
+    """Pairwise sums of each row's operands, one level a clock, until every row is one sum:
+    levels[level][row] = that level's nodes. Every row takes the same number of levels; an odd
+    operand is carried by a one-operand node."""
+    levels = []
+    while any(len(r) > 1 for r in rows):
+        lv = len(levels)
+        rows = [[_tree_node(f"{prefix}{lv}_{i}_{k // 2}", r[k:k + 2])
+                 for k in range(0, len(r), 2)] for i, r in enumerate(rows)]
+        levels.append(rows)
+    return levels
+
+
 def sample_cond_context(cfg: Config) -> dict[str, Any]:
-    """x_i = mu_i + sum_{j<=i} L_ij e_j (model.blocks.sample_cond): one product per L entry
-    (stage 1), one rounded, saturated sum per component (stage 2)."""
+    """x_i = mu_i + sum_{j<=i} L_ij e_j (model.blocks.sample_cond), pipelined for a 125 MHz+
+    ECP5 clock: the beat's operands registered (stage 0, a copy for each multiplier), every
+    product registered straight out of 18 x 18 multipliers (stage 1: an L entry wider than 18
+    bits split into its signed top 18 bits and its unsigned low bits, two products) and again
+    (stage 2), each component's exact terms summed two by two, one level a clock, and the sum
+    rounded half up and saturated (the last stage).
+    The same exact sum and one rounding as the model: only where registers sit moves."""
     dp = datapath(cfg)
     n, noise = dp.n, dp.noise
+    if noise.width > CONST_WIDTH:
+        raise ValueError(f"sample_cond: the noise ({noise}) is wider than a multiplier operand")
     pairs = [(i, j) for i in range(n) for j in range(i + 1)]      # L's row order
-    rows = []
+    rows, leaves = [], []
+    e_lo, e_hi = noise.min_raw, noise.max_raw
     for i in range(n):
         x, chol = dp.x[i], dp.chol[i]
         lo, hi = _product_range(chol, noise)
         terms = [(x.min_raw, x.max_raw, x.frac_bits)]
         terms += [(lo, hi, chol.frac_bits + noise.frac_bits)] * (i + 1)
+        plan = _round_sum_plan(terms, x)
+        mu_sh, p_sh = plan["shifts"][0], plan["shifts"][1]
+        if mu_sh != plan["round_shift"]:
+            raise ValueError("sample_cond: mu is not at the rounding's LSB")
+        split = max(0, chol.width - CONST_WIDTH)     # L's low bits in a product of their own
+        # mu with the half LSB below it: the rounding constant costs no adder
+        row = [{"sig": f"mu{i}_q", "width": x.width, "shift": 0, "low_bits": mu_sh,
+                "low": plan["half"], "lo": (x.min_raw << mu_sh) + plan["half"],
+                "hi": (x.max_raw << mu_sh) + plan["half"]}]
+        for j in range(i + 1):
+            if split:
+                h_lo, h_hi = chol.min_raw >> split, chol.max_raw >> split
+                hc = [a * b for a in (h_lo, h_hi) for b in (e_lo, e_hi)]
+                lc = [a * b for a in (0, (1 << split) - 1) for b in (e_lo, e_hi)]
+                row.append({"sig": f"ph{i}_{j}_q", "width": _signed_width(min(hc), max(hc)),
+                            "shift": p_sh + split, "low_bits": 0, "low": 0,
+                            "lo": min(hc) << (p_sh + split), "hi": max(hc) << (p_sh + split)})
+                row.append({"sig": f"pl{i}_{j}_q", "width": _signed_width(min(lc), max(lc)),
+                            "shift": p_sh, "low_bits": 0, "low": 0,
+                            "lo": min(lc) << p_sh, "hi": max(lc) << p_sh})
+            else:
+                row.append({"sig": f"p{i}_{j}_q", "width": _signed_width(lo, hi),
+                            "shift": p_sh, "low_bits": 0, "low": 0,
+                            "lo": lo << p_sh, "hi": hi << p_sh})
+        leaves.append(row)
         rows.append({"x_width": x.width, "x_fmt": str(x), "chol_width": chol.width,
-                     "chol_fmt": str(chol), "prod_width": chol.width + noise.width,
-                     **_round_sum_plan(terms, x)})
+                     "chol_fmt": str(chol), "prod_width": row[1]["width"],
+                     "split": split, "hi_width": chol.width - split,
+                     "lo_prod_width": row[2]["width"] if split else 0, **plan})
+    levels = _adder_tree(leaves, "t")
+    finals = [r[0] for r in levels[-1]]
+    for row, total in zip(rows, finals, strict=True):
+        # the split products' ranges, taken apart, may reach a bit past the whole sum's
+        row["width"] = max(row["width"], total["width"])
     mu_off = [sum(dp.x[k].width for k in range(i)) for i in range(n)]
     mu_w = sum(f.width for f in dp.x)
     chol_off = {}
@@ -452,11 +513,13 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         offset += dp.chol[i].width
     x_off = mu_off     # the output lane packs x like mu, then sat
     return {
-        "lanes": cfg.lanes, "latency": 2, "n": n,
+        # the operands' registers, the products twice, the adder levels, the rounding
+        "lanes": cfg.lanes, "latency": len(levels) + 4, "n": n,
         "noise_width": noise.width, "noise_fmt": str(noise),
         "in_width": n * noise.width, "out_width": mu_w + 1, "x_width": mu_w,
         "op_width": offset, "mu_width": mu_w, "chol_width": offset - mu_w,
         "rows": rows, "mu_off": mu_off, "chol_off": chol_off, "x_off": x_off,
+        "pairs": pairs, "levels": levels, "finals": finals,
     }
 
 
@@ -746,8 +809,12 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
 
 def sigma_predict_context(cfg: Config) -> dict[str, Any]:
     """The predicted covariance F Sigma F^T + Q (model: blocks.predicted_sigma) as a program of
-    terms (blocks.prediction_terms), one a clock through one multiplier: every term's exact
-    value brought to the largest fraction of any term, summed per entry, rounded once."""
+    terms (blocks.prediction_terms), one a clock: every term's exact value brought to the largest
+    fraction of any term, summed per entry from the entry's half LSB, rounded once (a shift).
+    A term whose constant is a power of two is its Sigma entry shifted, a constant alone is a
+    constant: both come out of the program's multiplexer at the common fraction, no multiplier
+    and no shifter in the datapath. Only a term Sigma_ab c with any other c needs the multiplier
+    (`has_mul`: one more stage; none in the shipped configs)."""
     dp = datapath(cfg)
     pairs = cholesky_pairs(cfg)
     program = prediction_terms(dp, pairs)
@@ -759,24 +826,36 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         for k, (src, name) in enumerate(entry):
             coef = dp.consts[name].raw if name is not None else 1
             lsh = top - term_frac(dp, pairs, (src, name))
-            terms.append({"src": src, "coef": f"{_twos(coef, CONST_WIDTH):X}", "lsh": lsh,
-                          "first": k == 0, "last": k == len(entry) - 1, "dest": q})
             ends.append((sw if src is not None else 2) + CONST_WIDTH + lsh)
+            terms.append({"src": src, "coef": coef, "lsh": lsh, "first": k == 0,
+                          "last": k == len(entry) - 1, "dest": q})
     acc_w = max(ends) + max(len(e) for e in program).bit_length() + 1
+    entry_half = [(1 << (top - dp.cov_frac(i, j))) >> 1 for i, j in pairs]
+    for t in terms:
+        c = t["coef"]
+        if t["src"] is None:                   # the constant alone, at the common fraction
+            t["kind"], t["value"] = "const", f"{_twos(c << t['lsh'], acc_w):X}"
+        elif c > 0 and c & (c - 1) == 0:       # Sigma_ab 2^m: Sigma_ab shifted
+            t["kind"], t["shift"] = "shift", t["lsh"] + c.bit_length() - 1
+        else:                                  # Sigma_ab c: through the multiplier
+            t["kind"], t["shift"] = "mul", t["lsh"]
+        t["mul_coef"] = f"{_twos(c if t['kind'] == 'mul' else 1, CONST_WIDTH):X}"
+        # the rounding's half LSB starts the entry's sum
+        t["init"] = f"{entry_half[t['dest']] if t['first'] else 0:X}"
+    has_mul = any(t["kind"] == "mul" for t in terms)
     offs = [sum(sigma_w[:q]) for q in range(len(pairs))]
-    entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j),
-                "half": (1 << (top - dp.cov_frac(i, j))) >> 1}
+    entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j)}
                for (i, j), o, w in zip(pairs, offs, sigma_w, strict=True)]
     inputs = [{"off": o, "w": w} for o, w in zip(offs, sigma_w, strict=True)]
     return {
         "lanes": cfg.lanes, "npairs": len(pairs), "in_width": sum(sigma_w),
         "out_width": sum(sigma_w) + 3, "sw": sw, "cw": CONST_WIDTH, "acc_w": acc_w,
-        "top": top, "terms": terms, "entries": entries, "inputs": inputs,
+        "top": top, "terms": terms, "entries": entries, "inputs": inputs, "has_mul": has_mul,
         "kw": max(1, (len(terms) - 1).bit_length()),
-        "shift_w": max(1, max(t["lsh"] for t in terms).bit_length()),
         "dest_w": max(1, (len(pairs) - 1).bit_length()),
-        # the beat, every term through stages A and B, the last rounding, the output register
-        "latency": len(terms) + 3, "interval": len(terms) + 4,
+        # the beat, every term through the program's register (and the multiplier's) and the
+        # sum, the last rounding, the output register
+        "latency": len(terms) + 3 + has_mul, "interval": len(terms) + 4 + has_mul,
         "covariance": cfg.app_params.get("covariance", "full"),
     }
 

@@ -260,8 +260,14 @@ def sample_cond_view(cfg: Config, sim: str) -> list[Group]:
         Group(f"lane 0, component {n - 1}", [
             Trace(f"{lane}.mu{n - 1}_q", dp.x[n - 1].width - 1, 0, label="mu", signed=True,
                   frac_bits=dp.x[n - 1].frac_bits),
-            Trace(f"{lane}.p{n - 1}_{n - 1}_q", row["prod_width"] - 1, 0, label="L e (last)",
-                  signed=True, frac_bits=pf),
+            *([Trace(f"{lane}.ph{n - 1}_{n - 1}_q", row["prod_width"] - 1, 0,
+                     label="L e (last), L's top bits", signed=True,
+                     frac_bits=pf - row["split"]),
+               Trace(f"{lane}.pl{n - 1}_{n - 1}_q", row["lo_prod_width"] - 1, 0,
+                     label="L e (last), L's low bits", signed=True, frac_bits=pf)]
+              if row["split"] else
+              [Trace(f"{lane}.p{n - 1}_{n - 1}_q", row["prod_width"] - 1, 0,
+                     label="L e (last)", signed=True, frac_bits=pf)]),
             Trace(f"{lane}.x{n - 1}_sum", row["width"] - 1, 0, label="sum + half LSB",
                   signed=True, frac_bits=pf),
             _bit(f"{lane}.x{n - 1}_ovf", "saturates"),
@@ -491,8 +497,8 @@ def sigma_predict_view(cfg: Config, sim: str) -> list[Group]:
             _bit(f"{top}.busy_q", "busy"),
             Trace(f"{top}.k_q", k["kw"] - 1, 0, label="term", frac_bits=0),
             # wider than 64 bits: GTKWave shows them in hex
-            Trace(f"{top}.prod_q", k["sw"] + k["cw"] - 1, 0, label="product (hex)",
-                  frac_bits=None),
+            Trace(f"{top}.val_q", k["acc_w"] - 1, 0,
+                  label=f"term, fraction {k['top']} (hex)", frac_bits=None),
             Trace(f"{top}.acc_q", k["acc_w"] - 1, 0,
                   label=f"entry's sum, fraction {k['top']} (hex)", frac_bits=None),
             _bit(f"{top}.sat_q", "SAT so far")]),

@@ -120,8 +120,9 @@ MUTANTS = {
     "sample_cond-first-of-step": ("sample_cond", "sample_cond.sv.j2",
                                   "first_q <= s_axis_tlast;", "first_q <= 1'b0;"),
     # half an LSB minus one: only exact ties round differently (the corner test makes them)
-    "sample_cond-round-half": ("sample_cond", "_round_sum.sv.j2", "'sd{{ plan.half }}",
-                               "'sd{{ plan.half - 1 }}"),
+    "sample_cond-round-half": ("sample_cond", "sample_cond_lane.sv.j2",
+                               "o.low_bits ~ \"'d\" ~ o.low ~",
+                               "o.low_bits ~ \"'d\" ~ (o.low - 1) ~"),
     "sample_cond-sat-any": ("sample_cond", "sample_cond_lane.sv.j2",
                             "{% if not loop.last %} || {% endif %}",
                             "{% if not loop.last %} && {% endif %}"),
@@ -155,7 +156,7 @@ MUTANTS = {
                                  "assign o{{ loop.index0 }} = !(",
                                  "assign o{{ loop.index0 }} = 1'b0 && !("),
     "sigma_predict-first-term": ("sigma_predict", "sigma_predict.sv.j2",
-                                 "(first_q ? AW'(0) : acc_q)", "(acc_q)"),
+                                 "({{ pre }}first_q ? {{ pre }}init_q : acc_q)", "(acc_q)"),
     # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
     "weight-bot-z-delay": ("weight_bot", "weight_bot.sv.j2", ".z      (zd_q[ZD*AW-1 -: AW]),",
                            ".z      (zd_q[(ZD-1)*AW-1 -: AW]),"),
