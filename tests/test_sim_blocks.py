@@ -137,11 +137,10 @@ MUTANTS = {
                           "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) + {{ W + 1 }}'(ref{{ i }}_q);"),
     # the mean floored instead of rounded half up
     "moments-mean-rounding": ("moments", "moments.sv.j2",
-                              "{{ d.qb + 1 }}'sd{{ 2 ** s }};", "{{ d.qb + 1 }}'sd0;"),
-    # the rescale of the sums truncates instead of rounding
+                              "\"$signed({ref%d_q, 1'b1})\"", "\"$signed({ref%d_q, 1'b0})\""),
+    # the rescale of the sums truncates instead of rounding (t = 2 acc + 1 loses its + 1)
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
-                                 "+ {{ w + 1 }}'{{ 's' if signed }}d1;",
-                                 "+ {{ w + 1 }}'{{ 's' if signed }}d0;"),
+                                 "~{{ name }}_t_q[0] : 1'b1};", "~{{ name }}_t_q[0] : 1'b0};"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
