@@ -565,7 +565,7 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         qd = _div_params(word, rb, fq + g, qbound)
         # mu registered, the squares' partial products, the squares, their sum
         t_sqrt = t_mean + 4
-        t_qdiv = t_sqrt + 1 + rb
+        t_qdiv = t_sqrt + 1 + rb + 1                  # the dividends' norm terms registered
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
         ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
