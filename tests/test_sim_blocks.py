@@ -138,9 +138,9 @@ MUTANTS = {
     # the mean floored instead of rounded half up
     "moments-mean-rounding": ("moments", "moments.sv.j2",
                               "\"$signed({ref%d_q, 1'b1})\"", "\"$signed({ref%d_q, 1'b0})\""),
-    # the rescale of the sums truncates instead of rounding (t = 2 acc + 1 loses its + 1)
+    # the rescale of the sums drops its rounding half when the new frame is not 0
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
-                                 "~{{ name }}_t_q[0] : 1'b1};", "~{{ name }}_t_q[0] : 1'b0};"),
+                                 "{{ name }}_rb_q <= {{ s4 }} != '0", "{{ name }}_rb_q <= 1'b0"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
