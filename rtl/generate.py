@@ -554,6 +554,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     # m_i m_j: m_i registered, its DSP-sized partial products, their middle sum, the product
     mm_lat = 4
     t_load = max(t_sig, t_mean + mm_lat, t_ess)
+    # Sigma_ij's two candidates (last quotient bit 0 or 1) taken at c = QB, m_i m_j ready by then
+    if t_mean + mm_lat > min(d["qb"] for d in sig):
+        raise ValueError("moments: m_i m_j later than a Sigma quotient's last bit (not generated)")
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
         fq = dp.x[0].frac_bits
