@@ -611,11 +611,16 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     ess = _div_params(2 * ws_w, wws_w, dp.ess.frac_bits, dp.ess.max_raw)
     ess["qb"] = dp.ess.width                          # unsigned: the quotient is the field
     ess["nnw"] = ess["dw"] + ess["qb"]
-    t_ess_div = sq_steps + 1
+    t_ess_div = sq_steps + 2                          # W^2 done, then its dividend registered
     t_ess = t_ess_div + 1 + ess["qb"]
     t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
     t_sig = 1 + max(d["qb"] for d in sig)
-    t_load = max(t_sig, t_mean + 1, t_ess)
+    # m_i m_j: m_i registered, its DSP-sized partial products, their middle sum, the product
+    mm_lat = 4
+    t_load = max(t_sig, t_mean + mm_lat, t_ess)
+    # Sigma_ij's two candidates (last quotient bit 0 or 1) taken at c = QB, m_i m_j ready by then
+    if t_mean + mm_lat > min(d["qb"] for d in sig):
+        raise ValueError("moments: m_i m_j later than a Sigma quotient's last bit (not generated)")
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
         fq = dp.x[0].frac_bits
@@ -625,12 +630,29 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         rb = (y_w + 1) // 2                           # root bits, one a clock
         qbound = -(-(1 << (fq + g + 1)) // ((1 << (g + 1)) - 1)) + 1  # 2^fq / (1 - 2^-(g+1))
         qd = _div_params(word, rb, fq + g, qbound)
-        t_sqrt = t_mean + 2                           # norm2 registered after mu
-        t_qdiv = t_sqrt + 1 + rb
+        # mu registered, the squares' partial products, the squares, their sum
+        t_sqrt = t_mean + 4
+        t_qdiv = t_sqrt + 1 + rb + 1                  # the dividends' norm terms registered
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
         ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    acc_stages = 6                                    # input, dx, w dx, p dx, lane sums, acc
+    acc_stages = 7                                    # input, dx, w dx, p dx, lane sums, acc, out
+    # p dx_j as DSP-sized partial products (one 18 x 18 each on ECP5, one DSP48E1 each on
+    # xc7), summed with the lanes: dx split into an unsigned low 18 bits and a small signed top
+    # (a shift-and-add, no multiplier) when wider than 18; p into unsigned 18-bit pieces (17
+    # beside dx's unsigned low part: xc7 multiplies 25 x 18 signed) and a signed top
+    b_split = word > 18
+    step = 17 if b_split else 18
+    pieces, lo = [], 0
+    while p_w - lo > 18:
+        pieces.append({"lo": lo, "hi": lo + step, "signed": False})
+        lo += step
+    pieces.append({"lo": lo, "hi": p_w, "signed": True})
+    for pc in pieces:
+        aw = pc["hi"] - pc["lo"] + (0 if pc["signed"] else 1)
+        pc["w"] = aw + (19 if b_split else word)      # exact signed product width
+    prod_plan = {"pieces": pieces, "b_split": b_split, "hb": word - 18 if b_split else 0,
+                 "hw": p_w + word - 18 if b_split else 0}
     ctx.update({
         "lanes": cfg.lanes, "n": n, "word": word, "ww": dp.weight.width,
         "x_fmts": [str(f) for f in dp.x], "w_fmt": str(dp.weight),
@@ -643,7 +665,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         "guard": guard, "k": k, "wdx_w": wdx_w, "p_w": p_w, "prod_w": prod_w,
         "ws_w": ws_w, "s1_w": s1_w, "s2_w": s2_w, "mean": mean, "sig": sig,
         "particles": nmax, "t_mean": t_mean, "t_sig": t_sig, "t_load": t_load,
-        "t_w": max(1, (t_load + 1).bit_length()),
+        "t_w": max(1, (t_load + 1).bit_length()), "mm_lat": mm_lat, "prod_plan": prod_plan,
+        "fb": 4,                                      # accumulator frames: 2^fb, shifts by 16 k
         "latency": acc_stages + t_load + 1, "covariance": cfg.app_params.get("covariance", "full"),
     })
     return ctx

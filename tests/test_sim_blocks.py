@@ -138,11 +138,10 @@ MUTANTS = {
                           "{{ W + 1 }}'(x1_{{ l }}_{{ i }}_q) + {{ W + 1 }}'(ref{{ i }}_q);"),
     # the mean floored instead of rounded half up
     "moments-mean-rounding": ("moments", "moments.sv.j2",
-                              "{{ d.qb + 1 }}'sd{{ 2 ** s }};", "{{ d.qb + 1 }}'sd0;"),
-    # the rescale of the sums truncates instead of rounding
+                              "\"$signed({ref%d_q, 1'b1})\"", "\"$signed({ref%d_q, 1'b0})\""),
+    # the rescale of the sums drops its rounding half when the new frame is not 0
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
-                                 "+ {{ w + 1 }}'{{ 's' if signed }}d1;",
-                                 "+ {{ w + 1 }}'{{ 's' if signed }}d0;"),
+                                 "{{ name }}_rb_q <= {{ s4 }} != '0", "{{ name }}_rb_q <= 1'b0"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
