@@ -180,6 +180,9 @@ FILTER_MUTANTS = {
     "moments-mean-rounding": (*MUTANTS["moments-mean-rounding"], None, {}),
     "weight-absolute-bot": ("weight_bot", "_weight.sv.j2",
                             *MUTANTS["weight-absolute"][2:], None, {}),
+    # the moments' reference beat through propagate with a draw at its most negative, not zero
+    "top-reference-noise": ("gpf_bot", "gpf.sv.j2", "{PEW'(0), ref_m_data}",
+                            "{1'b1, (PEW-1)'(0), ref_m_data}", None, {}),
     "ctrl-result-reset": ("ctrl", "ctrl.sv.j2", "      est_q <= '0;\n", "", None, {}),  # X
     # the frozen posterior: a low-ESS step keeps the previous Sigma instead of its prediction
     "ctrl-low-ess-frozen": ("ctrl", "ctrl.sv.j2", "low_ess ? sigma_pred_q :",
