@@ -767,15 +767,21 @@ def diagonal_blocks(n: int, pairs: list[tuple[int, int]]) -> list[tuple[int, int
     return blocks
 
 
+CHOL_PIVOT_CLOCKS = 3   # L_j,j-1 -> its square's parts -> two sums -> the pivot, registered
+
+
 def cholesky_context(cfg: Config) -> dict[str, Any]:
     """L = chol(Sigma) (model: gpf.model.blocks.cholesky_batch), one matrix per beat; one serial
     core per diagonal block of the covariance (uav "block": [q] and [v] side by side).
 
-    A core runs column j on a fixed schedule of CLOCKS[j] clocks (counter c): c = 0 .. n-1-j
-    issue the pivot and the rows' dot products Sigma_aj - sum_k<j L_ak L_jk into a pipeline of
-    P clocks (operands, products, then an adder tree of ceil(log2 n) levels); c = P floors the
-    pivot and loads the root; SQ clocks of 2 root bits (radix 4, three trial subtractions in
-    parallel); one clock rounds L_jj; one forms every row's 2 num + L_jj; QS clocks of 2
+    A core runs column j on a fixed schedule of CLOCKS[j] clocks (counter c). The pivot
+    Sigma_jj - sum_k<j L_jk^2 is the previous column's partial sum (k < j-1, from the dot
+    pipeline) less L_j,j-1^2, squared and subtracted in CHOL_PIVOT_CLOCKS: so only that one
+    product lies between a column's quotients and the next column's root. c = 0 .. n-2-j issue
+    the rows' dot products Sigma_aj - sum_k<j L_ak L_jk into a pipeline of P clocks (operands,
+    products, an adder tree), c = n-1-j row j+1's partial sum for the next pivot; c = PV floors
+    the pivot and loads the root; SQ clocks of 2 root bits (radix 4, three trial subtractions
+    in parallel); one clock rounds L_jj; one forms every row's 2 num + L_jj; QS clocks of 2
     quotient bits of floor(|2 num + L_jj| / 2 L_jj) in one divider per row (radix 4); one
     writes the rows: L_ij = round(num / L_jj), saturated. The last column stops after L_jj.
     """
@@ -801,8 +807,13 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
         terms = 1 + (size - 1) * (3 if w > 18 else 1)  # S_aj, each product whole or in parts
         levels = max(1, math.ceil(math.log2(terms)))
         p = 2 + levels                          # operands, products, the adder tree
-        clocks = [p + sq + qs + 5] * (size - 1) + [p + sq + 3]
+        # L_jj when the root is done and the last row's dot product is in
+        c_ljj = max(CHOL_PIVOT_CLOCKS + sq + 2, p + size - 2)
+        c_end = c_ljj + qs + 2                  # the rows' L_ij
+        clocks = [c_end + 1] * (size - 1) + [c_ljj + 1]
         cores.append({"start": start, "n": size, "p": p, "levels": levels,
+                      "pv": CHOL_PIVOT_CLOCKS, "c_ljj": c_ljj, "c_load": c_ljj + 1,
+                      "c_end": c_end,
                       "counts": [math.ceil(terms / 2**v) for v in range(levels + 1)],
                       "clocks": clocks, "latency": sum(clocks) + 2,
                       "cw": max(clocks).bit_length(), "jw": max(1, (size - 1).bit_length()),
