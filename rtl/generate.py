@@ -112,10 +112,6 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "s2_w": s2_w,
         "rom_w": rom_w,
         "rom": rom,
-        # bit b of the leading-zero count of p (u0.63) is set where the leading one sits at a
-        # position i whose count 62 - i has bit b
-        "lzc_masks": [f"{sum(1 << i for i in range(63) if (62 - i) >> b & 1):016X}"
-                      for b in range(6)],
     }
 
 
