@@ -35,6 +35,7 @@ from gpf.model.primitives import Cordic, recip
 from gpf.rtl.filter import filter_context
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
+DSP_WIDTH = 18         # an ECP5 MULT18X18D operand
 
 
 @dataclass(frozen=True)
@@ -688,6 +689,8 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
     if (ex["in_width"], ex["out_width"]) != (t.width, dp.weight.width):
         raise ValueError(f"weight: exp takes {ex['in_width']} bits, gives {ex['out_width']}")
     terms = len(d_fracs)
+    if terms not in (1, 3):
+        raise ValueError(f"weight: {terms} innovation terms (the templates sum 1 or 3)")
     sq_width = 2 * u.width
     return {
         "word": dp.word, "x_fmt": [str(f) for f in dp.x], "terms": terms,
@@ -697,8 +700,11 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
         "sq_width": sq_width, "sum_width": sq_width + (terms - 1).bit_length() + 1,
         "t_shift": t_shift, "t_width": t.width, "t_fmt": str(t), "t_max": t.max_raw,
         "t_frac": t.frac_bits, "w_width": dp.weight.width, "w_fmt": str(dp.weight),
-        # stages after the innovation d: product, u, squares, t
-        "tail_latency": 4,
+        # operands wider than a DSP's 18 bits: d c_u and u^2 split (u^2's parts summed in a
+        # stage D2 of its own)
+        "d_split": max(0, dp.word - DSP_WIDTH), "u_split": max(0, u.width - DSP_WIDTH),
+        # stages after the innovation d: product, u, squares (and D2), t
+        "tail_latency": 4 + (u.width > DSP_WIDTH),
         # the block's relative weights: stage M (running minimum), then the exp lanes
         "reach_top": reach_top(dp), "shift_width": SHIFT_BITS,
         "shift_max": (1 << SHIFT_BITS) - 1, "exp_latency": ex["latency"],
