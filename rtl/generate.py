@@ -277,8 +277,81 @@ def _round_sum(base: str, terms: list[tuple[int, _Sig]], width: int, frac: int
     sat = rlo < omin or rhi > omax
     # no saturation: the rounded sum is kept just as wide as the output (or sign-extended)
     rw = sw - shift if sat else min(sw - shift, width)
+    nneg = sum(p["neg"] for p in parts)
+    # the constant (the rounding half, +1 per subtracted term ~x + 1) in the zero low bits of
+    # an added term shifted past it, if there is one: one operand fewer
+    const = ((1 << shift) >> 1) + nneg
+    for p in parts:
+        p["fold"] = False
+    fold = next((p for p in parts if not p["neg"] and const < 1 << p["shift"]), None)
+    if fold is not None:
+        fold["fold"] = True
+    steps, final = _csa_plan(len(parts) + (1 if const and fold is None else 0))
     return r, {"base": base, "terms": parts, "sw": sw, "shift": shift,
-               "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat}
+               "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat,
+               "nneg": nneg, "const": const, "folded": fold is not None, "csa": steps,
+               "final": final}
+
+
+def _split_products(lines: list[dict[str, Any]]) -> tuple[list[dict], list[dict]]:
+    """A stage of products as two: P, each product's DSP-sized part a_hi b_hi (a_hi, b_hi: the
+    operands' signed top DSP_WIDTH bits) alone on its multiplier, and the parts with the
+    operands' low bits (k <= 2 bits: shifted adds); S, their sum (a carry-save pair and one
+    carry chain), registered as the product. A multiplier's output and an adder in one clock,
+    and four multipliers per 20 x 20 product spread over the die, held propagate_uav to 54 MHz."""
+    pre, post = [], []
+    for ln in lines:
+        a, aw, b, bw, w = ln["a"], ln["aw"], ln["b"], ln["bw"], ln["w"]
+        base = ln["name"].removesuffix("_q")
+        ka, kb = max(0, aw - DSP_WIDTH), max(0, bw - DSP_WIDTH)
+        if ka > 2 or kb > 2:     # (24-bit words): the whole product, registered twice
+            pre.append({"reg": f"{base}_h", "w": w, "expr": f"{w}'({a}) * {w}'({b})"})
+            post.append({"reg": ln["name"], "w": w, "expr": f"{base}_h"})
+            continue
+        ah = f"$signed({a}[{aw - 1}:{ka}])" if ka else a
+        bh = f"$signed({b}[{bw - 1}:{kb}])" if kb else b
+        hw = min(aw - ka + bw - kb, w)    # exact modulo 2^w: all the sum needs
+        pre.append({"reg": f"{base}_h", "w": hw, "expr": f"{hw}'({ah}) * {hw}'({bh})"})
+        terms = [(f"{base}_h", hw, ka + kb)]
+        if kb:      # a_hi b_lo
+            lw = aw - ka + kb + 1
+            v = f"{lw}'({ah})"
+            pre.append({"reg": f"{base}_lb", "w": lw, "expr": " + ".join(
+                f"({b}[{j}] ? {_shl(v, j)} : {lw}'(0))" for j in range(kb))})
+            terms.append((f"{base}_lb", lw, ka))
+        if ka:      # a_lo b
+            lw = bw + ka + 1
+            v = f"{lw}'({b})"
+            pre.append({"reg": f"{base}_la", "w": lw, "expr": " + ".join(
+                f"({a}[{i}] ? {_shl(v, i)} : {lw}'(0))" for i in range(ka))})
+            terms.append((f"{base}_la", lw, 0))
+        ops = [_shl(f"{w}'({n})" if nw != w else n, k) for n, nw, k in terms]
+        if len(ops) == 3:
+            x, y, z = ops
+            post.append({"wire": f"{base}_cs", "w": w, "expr": f"{x} ^ {y} ^ {z}"})
+            post.append({"wire": f"{base}_cc", "w": w,
+                         "expr": f"(({x} & {y}) | ({x} & {z}) | ({y} & {z})) <<< 1"})
+            ops = [f"{base}_cs", f"{base}_cc"]
+        post.append({"reg": ln["name"], "w": w, "expr": " + ".join(ops)})
+    return pre, post
+
+
+def _shl(expr: str, k: int) -> str:
+    return f"({expr} <<< {k})" if k else expr
+
+
+def _csa_plan(n: int) -> tuple[list[tuple[int, int, int, int, int]], list[int]]:
+    """Carry-save reduction of operands 0 .. n-1 to two: steps (a, b, c, sum, carry), new
+    operands numbered from n, three at a time, level by level; and the two (or one) left."""
+    ops, nxt, steps = list(range(n)), n, []
+    while len(ops) > 2:
+        new = []
+        for g in range(0, len(ops) - len(ops) % 3, 3):
+            steps.append((ops[g], ops[g + 1], ops[g + 2], nxt, nxt + 1))
+            new += [nxt, nxt + 1]
+            nxt += 2
+        ops = new + ops[len(ops) - len(ops) % 3:]
+    return steps, ops
 
 
 def _to(fmt: Format) -> tuple[int, int]:
@@ -292,10 +365,11 @@ def _const(name: str, c: Any) -> _Sig:
 def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     """q' = q + Omega(omega') q dt/2 and v' = v + (C(q) a' + g) dt, as blocks.propagate_uav.
 
-    Six stages: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
+    Six steps: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
     2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
-    5 h_k q_j and f dt; 6 q' and v' rounded. Every sum's signs and indices come from the
-    model's own tables (_OMEGA_Q, _ROT), every width from the exact ranges of its terms.
+    5 h_k q_j and f dt; 6 q' and v' rounded; each product step two stages (_split_products):
+    nine clocks. Every sum's signs and indices come from the model's own tables (_OMEGA_Q,
+    _ROT), every width from the exact ranges of its terms.
     """
     dp = datapath(cfg)
     if dp.app != "uav" or dp.gyro is None or dp.accel is None or dp.rot is None:
@@ -316,8 +390,8 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
                         for _, a, b in entry}):
         pq[a, b], line = _product(f"pq{a}{b}", x[a], x[b])
         s1.append(line)
-    omega = [_word(f"om{k}_q", dp.gyro) for k in range(3)]
-    accel = [_word(f"ac{m}_q", dp.accel) for m in range(3)]
+    omega = [_word(f"om{k}_q2", dp.gyro) for k in range(3)]     # to stage 2 (now 3)
+    accel = [_word(f"ac{m}_q2", dp.accel) for m in range(3)]
     # stage 2: omega' = omega + s_w e, a' = a + s_a e, C(q) entries: one rounding each
     s2, w2, a2, rot = [], [], [], {}
     for k in range(3):
@@ -358,7 +432,7 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     for row in _OMEGA_Q:
         for _, k, j in row:
             phq[k, j], line = _product(f"phq{k}{j}", h4[k], dataclasses.replace(
-                x[j], name=f"q{j}_d4"))
+                x[j], name=f"q{j}_d6"))
             s5.append(line)
     for n in range(3):
         p, line = _product(f"pf{n}", f4[n], k_dt)
@@ -367,17 +441,18 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed to stage 5)
     s6 = []
     for i, row in enumerate(_OMEGA_Q):
-        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d5"))]
+        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d8"))]
         terms += [(sign, phq[k, j]) for sign, k, j in row]
         s6.append(_round_sum(f"y{i}", terms, *_to(dp.x[i]))[1])
     for n in range(3):
-        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d5")), (1, pf[n])]
+        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d8")), (1, pf[n])]
         s6.append(_round_sum(f"y{4 + n}", terms, *_to(dp.x[4 + n]))[1])
     if len(set(dp.x[:4])) != 1 or len(set(dp.x[4:])) != 1:
         raise ValueError("propagate_uav: q (and v) components must share one format")
     widths = [fmt.width for fmt in dp.x]
+    stages = [*_split_products(s1), s2, *_split_products(s3), s4, *_split_products(s5), s6]
     return {
-        "lanes": cfg.lanes, "latency": 6,
+        "lanes": cfg.lanes, "latency": len(stages),
         "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
         "x_offsets": [sum(widths[:i]) for i in range(len(widths))], "x_width": sum(widths),
         "q_width": dp.x[0].width, "v_width": dp.x[4].width,
@@ -393,7 +468,10 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
                                    [c["s_w"], c["s_a"], c["dt2"], c["dt"],
                                     *(c[f"g{n}"] for n in range(3))], strict=True)
                    if v.raw != 0],   # a zero g_n drops out of its sum
-        "stages": [s1, s2, s3, s4, s5, s6],
+        "stages": stages,
+        # per stage: its saturating sums (their flags registered, ORed into sat a clock later)
+        "ovf": [[ln["base"] for ln in st if ln.get("sat")] for st in stages],
+        "q_delay": 8,
     }
 
 

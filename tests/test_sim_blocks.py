@@ -108,8 +108,8 @@ MUTANTS = {
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
     # q'2's last Omega term (+h0 q3 from the model's table) subtracted instead
     "propagate_uav-omega-sign": ("propagate_uav", "propagate_uav_lane.sv.j2",
-                                 "(' - ' if t.neg else ' + ')",
-                                 "(' - ' if t.neg != (r.base == 'y2' and loop.last) else ' + ')"),
+                                 "('~' if t.neg else '')",
+                                 "('~' if t.neg != (r.base == 'y2' and loop.last) else '')"),
     "propagate_uav-rounding": ("propagate_uav", "propagate_uav_lane.sv.j2",
                                "'sd{{ r.half }}", "'sd{{ r.half // 2 }}"),
     # every beat takes the operands held from the previous step's first beat
