@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -277,36 +278,27 @@ def _round_sum(base: str, terms: list[tuple[int, _Sig]], width: int, frac: int
     sat = rlo < omin or rhi > omax
     # no saturation: the rounded sum is kept just as wide as the output (or sign-extended)
     rw = sw - shift if sat else min(sw - shift, width)
-    nneg = sum(p["neg"] for p in parts)
-    # the constant (the rounding half, +1 per subtracted term ~x + 1) in the zero low bits of
-    # an added term shifted past it, if there is one: one operand fewer
-    const = ((1 << shift) >> 1) + nneg
-    for p in parts:
-        p["fold"] = False
-    fold = next((p for p in parts if not p["neg"] and const < 1 << p["shift"]), None)
-    if fold is not None:
-        fold["fold"] = True
-    steps, final = _csa_plan(len(parts) + (1 if const and fold is None else 0))
     return r, {"base": base, "terms": parts, "sw": sw, "shift": shift,
                "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat,
-               "nneg": nneg, "const": const, "folded": fold is not None, "csa": steps,
-               "final": final}
+               "copied": False}   # only copies registered (_operand_copies)
 
 
-def _split_products(lines: list[dict[str, Any]]) -> tuple[list[dict], list[dict]]:
-    """A stage of products as two: P, each product's DSP-sized part a_hi b_hi (a_hi, b_hi: the
-    operands' signed top DSP_WIDTH bits) alone on its multiplier, and the parts with the
-    operands' low bits (k <= 2 bits: shifted adds); S, their sum (a carry-save pair and one
-    carry chain), registered as the product. A multiplier's output and an adder in one clock,
-    and four multipliers per 20 x 20 product spread over the die, held propagate_uav to 54 MHz."""
-    pre, post = [], []
+def _split_products(lines: list[dict[str, Any]]
+                    ) -> tuple[list[dict], dict[str, list[tuple[str, int, int]]]]:
+    """A stage of products as their parts, each registered: a_hi b_hi (a_hi, b_hi: the
+    operands' signed top DSP_WIDTH bits) alone on its multiplier, the parts with the operands'
+    low bits (k <= 2 bits) in shifted adds; and for each product (by its name) its parts
+    (name, width, shift): the sums that take the product take its parts (_split_sum). A
+    multiplier's output and an adder in one clock, and four multipliers per 20 x 20 product
+    spread over the die, held propagate_uav to 54 MHz."""
+    pre, parts = [], {}
     for ln in lines:
         a, aw, b, bw, w = ln["a"], ln["aw"], ln["b"], ln["bw"], ln["w"]
         base = ln["name"].removesuffix("_q")
         ka, kb = max(0, aw - DSP_WIDTH), max(0, bw - DSP_WIDTH)
-        if ka > 2 or kb > 2:     # (24-bit words): the whole product, registered twice
+        if ka > 2 or kb > 2:     # (24-bit words): the whole product
             pre.append({"reg": f"{base}_h", "w": w, "expr": f"{w}'({a}) * {w}'({b})"})
-            post.append({"reg": ln["name"], "w": w, "expr": f"{base}_h"})
+            parts[ln["name"]] = [(f"{base}_h", w, 0)]
             continue
         ah = f"$signed({a}[{aw - 1}:{ka}])" if ka else a
         bh = f"$signed({b}[{bw - 1}:{kb}])" if kb else b
@@ -325,15 +317,61 @@ def _split_products(lines: list[dict[str, Any]]) -> tuple[list[dict], list[dict]
             pre.append({"reg": f"{base}_la", "w": lw, "expr": " + ".join(
                 f"({a}[{i}] ? {_shl(v, i)} : {lw}'(0))" for i in range(ka))})
             terms.append((f"{base}_la", lw, 0))
-        ops = [_shl(f"{w}'({n})" if nw != w else n, k) for n, nw, k in terms]
-        if len(ops) == 3:
-            x, y, z = ops
-            post.append({"wire": f"{base}_cs", "w": w, "expr": f"{x} ^ {y} ^ {z}"})
-            post.append({"wire": f"{base}_cc", "w": w,
-                         "expr": f"(({x} & {y}) | ({x} & {z}) | ({y} & {z})) <<< 1"})
-            ops = [f"{base}_cs", f"{base}_cc"]
-        post.append({"reg": ln["name"], "w": w, "expr": " + ".join(ops)})
-    return pre, post
+        parts[ln["name"]] = terms
+    return pre, parts
+
+
+def _operand_copies(prods: list[dict[str, Any]], before: list[dict[str, Any]]) -> None:
+    """An operand that feeds several products (a' three, h_k and q_j four) gets a register of
+    its own for each, kept apart by synthesis, in the stage `before` the products: one
+    register driving multipliers and shifted adds across the die was the critical path."""
+    sums = {ln["base"]: ln for ln in before if "base" in ln}
+    uses: dict[str, int] = {}
+    for ln in prods:
+        for key in ("a", "b"):
+            uses[ln[key]] = uses.get(ln[key], 0) + 1
+    for ln in prods:
+        base = ln["name"].removesuffix("_q")
+        for key, wkey in (("a", "aw"), ("b", "bw")):
+            src = ln[key]
+            if uses[src] < 2:
+                continue
+            delay = re.fullmatch(r"([qv]\d)_d(\d+)", src)
+            if src.endswith("_q") and src[:-2] in sums:
+                d = f"{src[:-2]}_d"
+                sums[src[:-2]]["copied"] = True
+            elif delay and int(delay[2]) > 1:
+                d = f"{delay[1]}_d{int(delay[2]) - 1}"
+            else:
+                continue
+            ln[key] = f"{src}_{base}"
+            before.append({"dup": ln[key], "w": ln[wkey], "d": d})
+
+
+def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, int, int]]]
+                ) -> tuple[list[dict], list[dict]]:
+    """A stage of rounded sums as two: C, every term (a product: its parts) at the common
+    fraction, a subtracted one as ~x (+1 in the constant), reduced carry-save to two words,
+    registered; R, their one carry chain, the rounding shift and the saturation. Widths and
+    saturation come from the whole terms' exact ranges (the parts add up modulo 2^sw)."""
+    for ln in lines:
+        ops = []
+        for t in ln["terms"]:
+            for name, w, sh in parts.get(t["name"], [(t["name"], t["w"], 0)]):
+                ops.append({"neg": t["neg"], "name": name, "w": w, "shift": t["shift"] + sh})
+        ln["terms"] = ops
+        nneg = sum(p["neg"] for p in ops)
+        const = ln["half"] + nneg
+        for p in ops:
+            p["fold"] = False
+        # the constant in the zero low bits of an added term shifted past it, if there is one
+        fold = next((p for p in ops if not p["neg"] and const < 1 << p["shift"]), None)
+        if fold is not None:
+            fold["fold"] = True
+        steps, final = _csa_plan(len(ops) + (1 if const and fold is None else 0))
+        ln.update({"nneg": nneg, "const": const, "folded": fold is not None, "csa": steps,
+                   "final": final})
+    return [{"carry_save": ln} for ln in lines], lines
 
 
 def _shl(expr: str, k: int) -> str:
@@ -367,8 +405,8 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
 
     Six steps: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
     2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
-    5 h_k q_j and f dt; 6 q' and v' rounded; each product step two stages (_split_products):
-    nine clocks. Every sum's signs and indices come from the model's own tables (_OMEGA_Q,
+    5 h_k q_j and f dt; 6 q' and v' rounded: nine clocks, a product step's parts, the
+    following sums' carry-save reduction (the products' parts their terms), their rounding. Every sum's signs and indices come from the model's own tables (_OMEGA_Q,
     _ROT), every width from the exact ranges of its terms.
     """
     dp = datapath(cfg)
@@ -390,8 +428,8 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
                         for _, a, b in entry}):
         pq[a, b], line = _product(f"pq{a}{b}", x[a], x[b])
         s1.append(line)
-    omega = [_word(f"om{k}_q2", dp.gyro) for k in range(3)]     # to stage 2 (now 3)
-    accel = [_word(f"ac{m}_q2", dp.accel) for m in range(3)]
+    omega = [_word(f"om{k}_q", dp.gyro) for k in range(3)]
+    accel = [_word(f"ac{m}_q", dp.accel) for m in range(3)]
     # stage 2: omega' = omega + s_w e, a' = a + s_a e, C(q) entries: one rounding each
     s2, w2, a2, rot = [], [], [], {}
     for k in range(3):
@@ -441,16 +479,21 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed to stage 5)
     s6 = []
     for i, row in enumerate(_OMEGA_Q):
-        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d8"))]
+        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d7"))]
         terms += [(sign, phq[k, j]) for sign, k, j in row]
         s6.append(_round_sum(f"y{i}", terms, *_to(dp.x[i]))[1])
     for n in range(3):
-        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d8")), (1, pf[n])]
+        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d7")), (1, pf[n])]
         s6.append(_round_sum(f"y{4 + n}", terms, *_to(dp.x[4 + n]))[1])
     if len(set(dp.x[:4])) != 1 or len(set(dp.x[4:])) != 1:
         raise ValueError("propagate_uav: q (and v) components must share one format")
     widths = [fmt.width for fmt in dp.x]
-    stages = [*_split_products(s1), s2, *_split_products(s3), s4, *_split_products(s5), s6]
+    stages: list[list[dict[str, Any]]] = []
+    for prods, sums in ((s1, s2), (s3, s4), (s5, s6)):
+        if stages:
+            _operand_copies(prods, stages[-1])
+        pre, parts = _split_products(prods)
+        stages += [pre, *_split_sums(sums, parts)]
     return {
         "lanes": cfg.lanes, "latency": len(stages),
         "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
@@ -470,8 +513,8 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
                    if v.raw != 0],   # a zero g_n drops out of its sum
         "stages": stages,
         # per stage: its saturating sums (their flags registered, ORed into sat a clock later)
-        "ovf": [[ln["base"] for ln in st if ln.get("sat")] for st in stages],
-        "q_delay": 8,
+        "ovf": [[ln["base"] for ln in st if ln.get("sat") and "base" in ln] for st in stages],
+        "q_delay": 7,
     }
 
 
