@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from gpf.model.primitives import Cordic, recip
 from gpf.rtl.filter import filter_context
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
+DSP_WIDTH = 18         # an ECP5 MULT18X18D operand
 
 
 @dataclass(frozen=True)
@@ -112,10 +114,6 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "s2_w": s2_w,
         "rom_w": rom_w,
         "rom": rom,
-        # bit b of the leading-zero count of p (u0.63) is set where the leading one sits at a
-        # position i whose count 62 - i has bit b
-        "lzc_masks": [f"{sum(1 << i for i in range(63) if (62 - i) >> b & 1):016X}"
-                      for b in range(6)],
     }
 
 
@@ -281,7 +279,117 @@ def _round_sum(base: str, terms: list[tuple[int, _Sig]], width: int, frac: int
     # no saturation: the rounded sum is kept just as wide as the output (or sign-extended)
     rw = sw - shift if sat else min(sw - shift, width)
     return r, {"base": base, "terms": parts, "sw": sw, "shift": shift,
-               "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat}
+               "half": (1 << shift) >> 1, "rw": rw, "ow": width, "sat": sat,
+               "copied": False}   # only copies registered (_operand_copies)
+
+
+def _split_products(lines: list[dict[str, Any]]
+                    ) -> tuple[list[dict], dict[str, list[tuple[str, int, int]]]]:
+    """A stage of products as their parts, each registered: a_hi b_hi (a_hi, b_hi: the
+    operands' signed top DSP_WIDTH bits) alone on its multiplier, the parts with the operands'
+    low bits (k <= 2 bits) in shifted adds; and for each product (by its name) its parts
+    (name, width, shift): the sums that take the product take its parts (_split_sum). A
+    multiplier's output and an adder in one clock, and four multipliers per 20 x 20 product
+    spread over the die, held propagate_uav to 54 MHz."""
+    pre, parts = [], {}
+    for ln in lines:
+        a, aw, b, bw, w = ln["a"], ln["aw"], ln["b"], ln["bw"], ln["w"]
+        base = ln["name"].removesuffix("_q")
+        ka, kb = max(0, aw - DSP_WIDTH), max(0, bw - DSP_WIDTH)
+        if ka > 2 or kb > 2:     # (24-bit words): the whole product
+            pre.append({"reg": f"{base}_h", "w": w, "expr": f"{w}'({a}) * {w}'({b})"})
+            parts[ln["name"]] = [(f"{base}_h", w, 0)]
+            continue
+        ah = f"$signed({a}[{aw - 1}:{ka}])" if ka else a
+        bh = f"$signed({b}[{bw - 1}:{kb}])" if kb else b
+        hw = min(aw - ka + bw - kb, w)    # exact modulo 2^w: all the sum needs
+        pre.append({"reg": f"{base}_h", "w": hw, "expr": f"{hw}'({ah}) * {hw}'({bh})"})
+        terms = [(f"{base}_h", hw, ka + kb)]
+        if kb:      # a_hi b_lo
+            lw = aw - ka + kb + 1
+            v = f"{lw}'({ah})"
+            pre.append({"reg": f"{base}_lb", "w": lw, "expr": " + ".join(
+                f"({b}[{j}] ? {_shl(v, j)} : {lw}'(0))" for j in range(kb))})
+            terms.append((f"{base}_lb", lw, ka))
+        if ka:      # a_lo b
+            lw = bw + ka + 1
+            v = f"{lw}'({b})"
+            pre.append({"reg": f"{base}_la", "w": lw, "expr": " + ".join(
+                f"({a}[{i}] ? {_shl(v, i)} : {lw}'(0))" for i in range(ka))})
+            terms.append((f"{base}_la", lw, 0))
+        parts[ln["name"]] = terms
+    return pre, parts
+
+
+def _operand_copies(prods: list[dict[str, Any]], before: list[dict[str, Any]]) -> None:
+    """An operand that feeds several products (a' three, h_k and q_j four) gets a register of
+    its own for each, kept apart by synthesis, in the stage `before` the products: one
+    register driving multipliers and shifted adds across the die was the critical path."""
+    sums = {ln["base"]: ln for ln in before if "base" in ln}
+    uses: dict[str, int] = {}
+    for ln in prods:
+        for key in ("a", "b"):
+            uses[ln[key]] = uses.get(ln[key], 0) + 1
+    for ln in prods:
+        base = ln["name"].removesuffix("_q")
+        for key, wkey in (("a", "aw"), ("b", "bw")):
+            src = ln[key]
+            if uses[src] < 2:
+                continue
+            delay = re.fullmatch(r"([qv]\d)_d(\d+)", src)
+            if src.endswith("_q") and src[:-2] in sums:
+                d = f"{src[:-2]}_d"
+                sums[src[:-2]]["copied"] = True
+            elif delay and int(delay[2]) > 1:
+                d = f"{delay[1]}_d{int(delay[2]) - 1}"
+            else:
+                continue
+            ln[key] = f"{src}_{base}"
+            before.append({"dup": ln[key], "w": ln[wkey], "d": d})
+
+
+def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, int, int]]]
+                ) -> tuple[list[dict], list[dict]]:
+    """A stage of rounded sums as two: C, every term (a product: its parts) at the common
+    fraction, a subtracted one as ~x (+1 in the constant), reduced carry-save to two words,
+    registered; R, their one carry chain, the rounding shift and the saturation. Widths and
+    saturation come from the whole terms' exact ranges (the parts add up modulo 2^sw)."""
+    for ln in lines:
+        ops = []
+        for t in ln["terms"]:
+            for name, w, sh in parts.get(t["name"], [(t["name"], t["w"], 0)]):
+                ops.append({"neg": t["neg"], "name": name, "w": w, "shift": t["shift"] + sh})
+        ln["terms"] = ops
+        nneg = sum(p["neg"] for p in ops)
+        const = ln["half"] + nneg
+        for p in ops:
+            p["fold"] = False
+        # the constant in the zero low bits of an added term shifted past it, if there is one
+        fold = next((p for p in ops if not p["neg"] and const < 1 << p["shift"]), None)
+        if fold is not None:
+            fold["fold"] = True
+        steps, final = _csa_plan(len(ops) + (1 if const and fold is None else 0))
+        ln.update({"nneg": nneg, "const": const, "folded": fold is not None, "csa": steps,
+                   "final": final})
+    return [{"carry_save": ln} for ln in lines], lines
+
+
+def _shl(expr: str, k: int) -> str:
+    return f"({expr} <<< {k})" if k else expr
+
+
+def _csa_plan(n: int) -> tuple[list[tuple[int, int, int, int, int]], list[int]]:
+    """Carry-save reduction of operands 0 .. n-1 to two: steps (a, b, c, sum, carry), new
+    operands numbered from n, three at a time, level by level; and the two (or one) left."""
+    ops, nxt, steps = list(range(n)), n, []
+    while len(ops) > 2:
+        new = []
+        for g in range(0, len(ops) - len(ops) % 3, 3):
+            steps.append((ops[g], ops[g + 1], ops[g + 2], nxt, nxt + 1))
+            new += [nxt, nxt + 1]
+            nxt += 2
+        ops = new + ops[len(ops) - len(ops) % 3:]
+    return steps, ops
 
 
 def _to(fmt: Format) -> tuple[int, int]:
@@ -295,10 +403,11 @@ def _const(name: str, c: Any) -> _Sig:
 def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     """q' = q + Omega(omega') q dt/2 and v' = v + (C(q) a' + g) dt, as blocks.propagate_uav.
 
-    Six stages: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
+    Six steps: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
     2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
-    5 h_k q_j and f dt; 6 q' and v' rounded. Every sum's signs and indices come from the
-    model's own tables (_OMEGA_Q, _ROT), every width from the exact ranges of its terms.
+    5 h_k q_j and f dt; 6 q' and v' rounded: nine clocks, a product step's parts, the
+    following sums' carry-save reduction (the products' parts their terms), their rounding. Every sum's signs and indices come from the model's own tables (_OMEGA_Q,
+    _ROT), every width from the exact ranges of its terms.
     """
     dp = datapath(cfg)
     if dp.app != "uav" or dp.gyro is None or dp.accel is None or dp.rot is None:
@@ -361,7 +470,7 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     for row in _OMEGA_Q:
         for _, k, j in row:
             phq[k, j], line = _product(f"phq{k}{j}", h4[k], dataclasses.replace(
-                x[j], name=f"q{j}_d4"))
+                x[j], name=f"q{j}_d6"))
             s5.append(line)
     for n in range(3):
         p, line = _product(f"pf{n}", f4[n], k_dt)
@@ -370,17 +479,23 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed to stage 5)
     s6 = []
     for i, row in enumerate(_OMEGA_Q):
-        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d5"))]
+        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d7"))]
         terms += [(sign, phq[k, j]) for sign, k, j in row]
         s6.append(_round_sum(f"y{i}", terms, *_to(dp.x[i]))[1])
     for n in range(3):
-        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d5")), (1, pf[n])]
+        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d7")), (1, pf[n])]
         s6.append(_round_sum(f"y{4 + n}", terms, *_to(dp.x[4 + n]))[1])
     if len(set(dp.x[:4])) != 1 or len(set(dp.x[4:])) != 1:
         raise ValueError("propagate_uav: q (and v) components must share one format")
     widths = [fmt.width for fmt in dp.x]
+    stages: list[list[dict[str, Any]]] = []
+    for prods, sums in ((s1, s2), (s3, s4), (s5, s6)):
+        if stages:
+            _operand_copies(prods, stages[-1])
+        pre, parts = _split_products(prods)
+        stages += [pre, *_split_sums(sums, parts)]
     return {
-        "lanes": cfg.lanes, "latency": 6,
+        "lanes": cfg.lanes, "latency": len(stages),
         "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
         "x_offsets": [sum(widths[:i]) for i in range(len(widths))], "x_width": sum(widths),
         "q_width": dp.x[0].width, "v_width": dp.x[4].width,
@@ -396,7 +511,10 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
                                    [c["s_w"], c["s_a"], c["dt2"], c["dt"],
                                     *(c[f"g{n}"] for n in range(3))], strict=True)
                    if v.raw != 0],   # a zero g_n drops out of its sum
-        "stages": [s1, s2, s3, s4, s5, s6],
+        "stages": stages,
+        # per stage: its saturating sums (their flags registered, ORed into sat a clock later)
+        "ovf": [[ln["base"] for ln in st if ln.get("sat") and "base" in ln] for st in stages],
+        "q_delay": 7,
     }
 
 
@@ -692,6 +810,8 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
     if (ex["in_width"], ex["out_width"]) != (t.width, dp.weight.width):
         raise ValueError(f"weight: exp takes {ex['in_width']} bits, gives {ex['out_width']}")
     terms = len(d_fracs)
+    if terms not in (1, 3):
+        raise ValueError(f"weight: {terms} innovation terms (the templates sum 1 or 3)")
     sq_width = 2 * u.width
     return {
         "word": dp.word, "x_fmt": [str(f) for f in dp.x], "terms": terms,
@@ -701,8 +821,11 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
         "sq_width": sq_width, "sum_width": sq_width + (terms - 1).bit_length() + 1,
         "t_shift": t_shift, "t_width": t.width, "t_fmt": str(t), "t_max": t.max_raw,
         "t_frac": t.frac_bits, "w_width": dp.weight.width, "w_fmt": str(dp.weight),
-        # stages after the innovation d: product, u, squares, t
-        "tail_latency": 4,
+        # operands wider than a DSP's 18 bits: d c_u and u^2 split (u^2's parts summed in a
+        # stage D2 of its own)
+        "d_split": max(0, dp.word - DSP_WIDTH), "u_split": max(0, u.width - DSP_WIDTH),
+        # stages after the innovation d: product, u, squares (and D2), t
+        "tail_latency": 4 + (u.width > DSP_WIDTH),
         # the block's relative weights: stage M (running minimum), then the exp lanes
         "reach_top": reach_top(dp), "shift_width": SHIFT_BITS,
         "shift_max": (1 << SHIFT_BITS) - 1, "exp_latency": ex["latency"],

@@ -204,6 +204,13 @@ def propagate_uav_view(cfg: Config, sim: str) -> list[Group]:
     def word(sig: str, width: int, frac: int, label: str) -> Trace:
         return Trace(f"{lane}.{sig}", width - 1, 0, label=label, signed=True, frac_bits=frac)
 
+    def reg(base: str) -> str:
+        """A rounded sum's register, or its first copy where only copies are kept."""
+        return next((ln["dup"] for st in k["stages"] for ln in st
+                     if ln.get("dup") and ln["d"] == f"{base}_d"), f"{base}_q")
+
+    last = len(k["stages"])
+
     return [
         Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
         _stream(top, f"input x ({dp.x[0]}, {dp.x[4]}), e ({dp.noise})", "s_axis",
@@ -217,14 +224,14 @@ def propagate_uav_view(cfg: Config, sim: str) -> list[Group]:
             for m in range(3)]),
         out,
         Group("lane 0 pipeline", [
-            word("w0_q", gw, dp.gyro.frac_bits, "omega'0, stage 2"),
-            word("a2_q", aw, dp.accel.frac_bits, "a'2, stage 2"),
-            word("c22_q", dp.rot.width, dp.rot.frac_bits, "C22, stage 2"),
-            word("h0_q", dp.word, dp.h_frac, "h0 = omega'0 dt/2, stage 4"),
-            word("f2_q", aw, dp.accel.frac_bits, "fU = (C a' + g)U, stage 4"),
-            word("y0_q", dp.x[0].width, dp.x[0].frac_bits, "q'0, stage 6"),
-            word("y6_q", dp.x[6].width, dp.x[6].frac_bits, "v'U, stage 6"),
-            Trace(f"{lane}.sat6_q", 0, 0, label="sat, stage 6"),
+            word(reg("w0"), gw, dp.gyro.frac_bits, "omega'0, stage 3"),
+            word(reg("a2"), aw, dp.accel.frac_bits, "a'2, stage 3"),
+            word(reg("c22"), dp.rot.width, dp.rot.frac_bits, "C22, stage 3"),
+            word(reg("h0"), dp.word, dp.h_frac, "h0 = omega'0 dt/2, stage 6"),
+            word(reg("f2"), aw, dp.accel.frac_bits, "fU = (C a' + g)U, stage 6"),
+            word("y0_q", dp.x[0].width, dp.x[0].frac_bits, f"q'0, stage {last}"),
+            word("y6_q", dp.x[6].width, dp.x[6].frac_bits, f"v'U, stage {last}"),
+            Trace(f"{lane}.sat{last}_q", 0, 0, label=f"sat, stage {last}"),
         ]),
     ]
 

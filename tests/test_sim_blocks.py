@@ -108,8 +108,8 @@ MUTANTS = {
                            "(y[IW-1] ? QUARTER : MINUS_QUARTER)"),
     # q'2's last Omega term (+h0 q3 from the model's table) subtracted instead
     "propagate_uav-omega-sign": ("propagate_uav", "propagate_uav_lane.sv.j2",
-                                 "(' - ' if t.neg else ' + ')",
-                                 "(' - ' if t.neg != (r.base == 'y2' and loop.last) else ' + ')"),
+                                 "('~' if t.neg else '')",
+                                 "('~' if t.neg != (r.base == 'y2' and loop.last) else '')"),
     "propagate_uav-rounding": ("propagate_uav", "propagate_uav_lane.sv.j2",
                                "'sd{{ r.half }}", "'sd{{ r.half // 2 }}"),
     # every beat takes the operands held from the previous step's first beat
@@ -146,7 +146,8 @@ MUTANTS = {
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
     "weight-absolute": ("weight_uav", "_weight.sv.j2",
-                        "[TW-1:TF] - rmin{{ lanes - 1 }}, lane_t", "[TW-1:TF], lane_t"),
+                        "{lower ? trel{{ lane }}_m : trel{{ lane }}_r, lane_t",
+                        "{lane_t[{{ lane }}][TW-1:TF], lane_t"),
     # the running minimum carried over from the previous step
     "weight-min-per-step": ("weight_bot", "_weight.sv.j2",
                             "assign r_prev = mfirst_q ? TOP : r_q;", "assign r_prev = r_q;"),
