@@ -639,7 +639,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
         ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    acc_stages = 7                                    # input, dx, w dx, p dx, lane sums, acc, out
+    # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
+    acc_stages = 9
     # p dx_j as DSP-sized partial products (one 18 x 18 each on ECP5, one DSP48E1 each on
     # xc7), summed with the lanes: dx split into an unsigned low 18 bits and a small signed top
     # (a shift-and-add, no multiplier) when wider than 18; p into unsigned 18-bit pieces (17
