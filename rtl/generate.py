@@ -719,6 +719,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         bound = (((1 << (2 * word - 2 - k)) + err) << s) + 1 if k else (
             (1 << (2 * word - 2 + s)) + 1)
         d = _div_params(s2_w, ws_w, s, bound)
+        if d["qb"] < ws_w:                            # den + 2^QB den side by side, no add
+            raise ValueError("moments: a Sigma quotient narrower than W (not generated)")
         mm_w = mean[i]["qb"] + mean[j]["qb"]
         d.update(i=i, j=j, mm_w=mm_w, v_w=max(d["qb"], mm_w) + 1,
                  out_w=dp.sigma(i, j).width, fmt=str(dp.sigma(i, j)))
@@ -732,13 +734,14 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     t_ess_div = sq_steps + 2                          # W^2 done, then its dividend registered
     t_ess = t_ess_div + 1 + ess["qb"]
     t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
-    t_sig = 1 + max(d["qb"] for d in sig)
-    # m_i m_j: m_i registered, its DSP-sized partial products, their middle sum, the product
-    mm_lat = 4
+    t_sig = 2 + max(d["qb"] for d in sig)             # the quotient, then q - m_i m_j registered
+    # m_i m_j: m_i registered, each DSP's operands, its DSP-sized partial products, their middle
+    # sum, the product
+    mm_lat = 5
     t_load = max(t_sig, t_mean + mm_lat, t_ess)
-    # Sigma_ij's two candidates (last quotient bit 0 or 1) taken at c = QB, m_i m_j ready by then
-    if t_mean + mm_lat > min(d["qb"] for d in sig):
-        raise ValueError("moments: m_i m_j later than a Sigma quotient's last bit (not generated)")
+    # q - m_i m_j registered at c = QB + 1 (the quotient final): m_i m_j ready by then
+    if t_mean + mm_lat > 1 + min(d["qb"] for d in sig):
+        raise ValueError("moments: m_i m_j later than a Sigma quotient (not generated)")
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
         fq = dp.x[0].frac_bits
@@ -754,7 +757,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
         ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    acc_stages = 7                                    # input, dx, w dx, p dx, lane sums, acc, out
+    # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
+    acc_stages = 9
     # p dx_j as DSP-sized partial products (one 18 x 18 each on ECP5, one DSP48E1 each on
     # xc7), summed with the lanes: dx split into an unsigned low 18 bits and a small signed top
     # (a shift-and-add, no multiplier) when wider than 18; p into unsigned 18-bit pieces (17
