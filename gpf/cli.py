@@ -481,6 +481,10 @@ def cmd_timing(args: argparse.Namespace) -> int:
           f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
     print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_cells} logic cells "
           "(each of a carry chain counts)")
+    print(f"  late: {t.late} of {t.endpoints} register inputs arrive after "
+          f"{1000 / t.target_mhz:.2f} ns")
+    for name, count, worst in t.late_groups:
+        print(f"    {name}: {count}, worst {worst:.2f} ns")
     used = ", ".join(f"{k} {u}/{a}" for k, (u, a) in t.utilisation.items())
     print(f"  ECP5 use: {used}")
     print(f"  -> {report} ({t.seconds:.0f} s; log: {t.log})")

