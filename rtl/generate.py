@@ -932,7 +932,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     qs = math.ceil((w - 1) / 2)                 # quotient clocks: |L_ij| < 2^(W-1) unsaturated
     cores = []
     for start, size in diagonal_blocks(n, pairs):
-        terms = 1 + (size - 1) * (3 if w > 18 else 1)  # S_aj, each product whole or in parts
+        terms = 1 + (size - 1) * (3 if w > DSP_WIDTH else 1)  # S_aj, products whole or in parts
         levels = max(1, math.ceil(math.log2(terms)))
         p = 2 + levels                          # operands, products, the adder tree
         # L_jj when the root is done and the last row's dot product is in
@@ -953,7 +953,8 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     core_of = {i: c for c in cores for i in range(c["start"], c["start"] + c["n"])}
     return {
         "lanes": cfg.lanes, "latency": latency, "interval": latency,
-        "n": n, "w": w, "sw": sw, "acc_w": acc_w, "sq": sq, "qs": qs, "dg": 2 * sq,
+        "n": n, "w": w, "sw": sw, "acc_w": acc_w, "dsp_w": DSP_WIDTH, "sq": sq, "qs": qs,
+        "dg": 2 * sq,
         "qb": 2 * qs, "cores": cores, "core_kinds": kinds,
         "floor_min": CHOL_FLOOR_LSB**2, "floor_rel_bits": CHOL_FLOOR_REL_BITS,
         "in_width": sum(sigma_w), "out_width": len(lower) * w + 3,

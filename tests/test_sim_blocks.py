@@ -174,7 +174,7 @@ MUTANTS = {
                                "assign floored = pvd_q <= floor_q;"),
     # the next pivot's L_j+1,j^2 with its cross term 2 aH aL 2^17 counted once
     "cholesky-pivot-square": ("cholesky", "cholesky_core.sv.j2",
-                              'acc_w) }} <<< 18);', 'acc_w) }} <<< 17);'),
+                              "<<< {{ lo + 1 }});", "<<< {{ lo }});"),
     "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
                                "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
