@@ -471,12 +471,18 @@ def cmd_timing(args: argparse.Namespace) -> int:
           "takes tens of minutes", flush=True)
     try:
         t = place_and_route(cfg, module, target_mhz=args.freq,
-                            timeout=args.timeout * 60 if args.timeout else None)
+                            timeout=args.timeout * 60 if args.timeout else None,
+                            dsp_registers=not args.fabric_dsp_registers)
     except SynthError as exc:
         print(f"gpf timing: FAILED: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILED
     report = t.log.parent / "timing.json"
     report.write_text(json.dumps(t.to_json(), indent=1) + "\n")
+    if t.dsp_registers:
+        d = t.dsp_registers
+        print(f"  DSP registers: {d['inputs']} operands and {d['outputs']} products of "
+              f"{d['dsps']} MULT18X18D registered inside ({d['flops_removed']} flip-flops "
+              "moved out of the fabric)")
     print(f"  Fmax {t.fmax_mhz:.1f} MHz (target {t.target_mhz:g}: "
           f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
     print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_cells} logic cells "
@@ -593,6 +599,9 @@ def build_parser() -> Parser:
     p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
     p.add_argument("--freq", type=float, default=125.0, help="target clock, MHz (default 125)")
     p.add_argument("--timeout", type=float, help="give up after this many minutes")
+    p.add_argument("--fabric-dsp-registers", action="store_true",
+                   help="leave the multipliers' registers in the fabric, as synth_ecp5 maps "
+                   "them (default: moved into each MULT18X18D, as a vendor flow does)")
     p.set_defaults(func=cmd_timing)
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")

@@ -2,7 +2,11 @@
 or a whole filter on an LFE5U-85F, out of context (no pins: a filter's ports outnumber any
 package's), and report Fmax and the critical path's ends.
 
-build/<config>/timing/<module>/   yosys.ys, yosys.log, netlist.json, nextpnr.log, report.json
+Between the two, the flip-flops either side of each multiplier move into its MULT18X18D
+(gpf.dsp_registers), as a vendor flow would do: synth_ecp5 leaves them in the fabric.
+
+build/<config>/timing/<module>/   yosys.ys, yosys.log, netlist.json (synth_ecp5's), packed.json
+                                  (the DSPs' registers in), nextpnr.log, report.json
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gpf.config import Config
+from gpf.dsp_registers import pack_dsp_registers
 from gpf.rtl.generate import MODULES
 from gpf.synth import SynthError, read_sources, rtl_files, run_yosys
 from gpf.toolchain import ToolchainError
@@ -38,6 +43,7 @@ class Timing:
     endpoints: int                         # register and DSP inputs timed
     late: int                              # of them, arriving after the target period
     late_groups: list[tuple[str, int, float]]   # (register name, how many, worst arrival ns)
+    dsp_registers: dict                    # gpf.dsp_registers.Packed, or {} when not packed
     seconds: float
     log: Path
 
@@ -77,7 +83,7 @@ def late_endpoints(data: dict, period_ns: float, most: int = 5
 
 def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                     target_mhz: float = TARGET_MHZ, timeout: float | None = None,
-                    seed: int = 1) -> Timing:
+                    seed: int = 1, dsp_registers: bool = True) -> Timing:
     top = MODULES[module].top
     folder = (build_root / cfg.name / "timing" / module).resolve()
     netlist, report, log = folder / "netlist.json", folder / "report.json", folder / "nextpnr.log"
@@ -86,9 +92,15 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
               + f"hierarchy -check -top {top}\n"
               + f"synth_ecp5 -top {top} -json {netlist.name}\n", folder)
     report.unlink(missing_ok=True)
+    placed, packed = netlist, {}
+    if dsp_registers:
+        design = json.loads(netlist.read_text())
+        packed = pack_dsp_registers(design).__dict__
+        placed = folder / "packed.json"
+        placed.write_text(json.dumps(design))
     try:
         run = subprocess.run([*nextpnr_command(), *DEVICE, "--out-of-context",
-                              "--json", netlist.name, "--freq", f"{target_mhz:g}",
+                              "--json", placed.name, "--freq", f"{target_mhz:g}",
                               "--seed", str(seed), "--report", report.name,
                               "--detailed-timing-report", "--log", log.name, "-q"],
                              capture_output=True, text=True, timeout=timeout, cwd=folder)
@@ -111,4 +123,4 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                   sum(step.get("type") == "logic" for step in path),
                   {k: [v["used"], v["available"]] for k, v in data.get("utilization", {}).items()
                    if v.get("used")},
-                  endpoints, late, groups, time.monotonic() - start, log)
+                  endpoints, late, groups, packed, time.monotonic() - start, log)

@@ -114,6 +114,7 @@ def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path) -> None:
     t = place_and_route(load_config("configs/bot.toml"), BLOCK, build_root=tmp_path)
     assert 1 < t.fmax_mhz < 1000 and t.path_from != "?.?" and t.path_to != "?.?"
     assert t.utilisation["TRELLIS_FF"][0] > 0
+    assert t.dsp_registers["dsps"] == t.utilisation["MULT18X18D"][0] > 0   # each one seen
     assert t.endpoints > 0 and 0 <= t.late <= t.endpoints
     if t.late:   # an arrival past the period fails the clock (the converse allows for setup)
         assert t.fmax_mhz < t.target_mhz, (t.late, t.fmax_mhz)
