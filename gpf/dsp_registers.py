@@ -6,9 +6,9 @@ flip-flops either side of a product sit in the fabric and each path pays the mul
 times above ~130 MHz. Lattice's own flow, like Yosys's for Xilinx (xilinx_dsp), moves those
 flip-flops into the DSP. This pass does the same on synth_ecp5's JSON netlist before nextpnr:
 
-- an operand (A or B) whose every non-constant bit is a flip-flop's output becomes the DSP's
-  input register, fed from those flip-flops' inputs (the flip-flops stay if anything else
-  reads them);
+- an operand (A or B) whose every non-constant bit is a flip-flop's output, itself fed by a
+  flip-flop, becomes the DSP's input register, fed from those flip-flops' inputs (the
+  flip-flops stay if anything else reads them);
 - a product whose every read bit goes to a flip-flop and nowhere else becomes the DSP's output
   register, and those flip-flops go.
 
@@ -62,6 +62,17 @@ def _control(cell: dict) -> list:
     return [cell["connections"]["CLK"], enable, cell["connections"].get("LSR", ["0"])]
 
 
+def _from_a_flop(net: _Netlist, flop: dict) -> bool:
+    """The flip-flop's input is another flip-flop's output (or a constant): moving it into the
+    DSP leaves a register-to-register hop to the DSP. With logic before it, the logic's path
+    would end at the DSP column instead of beside the logic, and be the longer for it."""
+    bit = flop["connections"]["DI"][0]
+    if not isinstance(bit, int):
+        return True
+    name, port = net.driver.get(bit, ("", ""))
+    return port == "Q" and net.cells.get(name, {}).get("type") == "TRELLIS_FF"
+
+
 def _clears_a_one(control: list, bits: list) -> bool:
     """A reset would clear an operand bit tied to 1, which no fabric flip-flop holds."""
     return control[2] != ["0"] and "1" in bits
@@ -109,6 +120,10 @@ def _pack_input(net: _Netlist, dsp: dict, side: str, clock: list | None, sources
     if not live or any(f is None for f in flops):
         stats.refuse(f"{side}: an operand bit from logic or a flip-flop with a set or an "
                      "unsupported reset")
+        return None
+    if any(not _from_a_flop(net, f) for f in flops):
+        stats.refuse(f"{side}: logic before the operand flip-flops (it would then have to "
+                     "reach the DSP)")
         return None
     controls = [_control(f) for f in flops]
     if not _same(controls) or (clock is not None and controls[0][0] != clock):

@@ -29,36 +29,41 @@ module dsp_cases (
   output reg signed [47:0] wide, output reg signed [35:0] held, output reg signed [35:0] ones,
   output reg signed [35:0] mixed
 );
+  // the inputs registered first: an operand flip-flop fed by a flip-flop moves into the DSP
+  reg [17:0] ra, rb, rc;
+  reg [23:0] rw;
+  always @(posedge clk) begin ra <= a; rb <= b; rc <= c; rw <= w; end
   // both operands and the product registered: all three move
   reg signed [17:0] a1, b1;
-  always @(posedge clk) begin a1 <= a; b1 <= b; plain <= a1 * b1; end
+  always @(posedge clk) begin a1 <= ra; b1 <= rb; plain <= a1 * b1; end
   // one enable for all, unsigned, a narrow operand (constant upper bits)
   reg [9:0] a2; reg [17:0] b2;
-  always @(posedge clk) if (en) begin a2 <= a[9:0]; b2 <= c; gated <= a2 * b2; end
+  always @(posedge clk) if (en) begin a2 <= ra[9:0]; b2 <= rc; gated <= a2 * b2; end
   // a synchronous reset, no enable: all three move, the reset with them
   reg signed [17:0] a3, b3;
   always @(posedge clk)
     if (rst) begin a3 <= 0; b3 <= 0; reset <= 0; end
-    else begin a3 <= b; b3 <= c; reset <= a3 * b3; end
-  // a product added to before its register stays unregistered
+    else begin a3 <= rb; b3 <= rc; reset <= a3 * b3; end
+  // logic before an operand keeps its register in the fabric; a product added to before
+  // its register stays unregistered
   reg signed [17:0] a4, b4;
-  always @(posedge clk) begin a4 <= c; b4 <= a; summed <= a4 * b4 + $signed(w); end
+  always @(posedge clk) begin a4 <= rc + 18'd1; b4 <= ra; summed <= a4 * b4 + $signed(w); end
   // an operand that is another DSP's registered product stays unregistered
   always @(posedge clk) chained <= plain[35:18] * b1;
   // wider than the DSP: split by synthesis, operands registered in each part
   reg signed [23:0] a6, b6;
-  always @(posedge clk) begin a6 <= w; b6 <= {a, b[5:0]}; wide <= a6 * b6; end
+  always @(posedge clk) begin a6 <= rw; b6 <= {ra, rb[5:0]}; wide <= a6 * b6; end
   // a reset beside an enable stays in the fabric
   reg signed [17:0] a7;
-  always @(posedge clk) if (rst) a7 <= 0; else if (en) a7 <= a;
+  always @(posedge clk) if (rst) a7 <= 0; else if (en) a7 <= ra;
   always @(posedge clk) held <= a7 * b1;
   // an operand bit tied to 1 beside a reset stays in the fabric (the DSP would clear it)
   reg [15:0] a8;
-  always @(posedge clk) a8 <= rst ? 16'd0 : a[15:0];
+  always @(posedge clk) a8 <= rst ? 16'd0 : ra[15:0];
   always @(posedge clk) ones <= $signed({2'b01, a8}) * b1;
   // operand bits under different enables stay in the fabric
   reg [17:0] a9;
-  always @(posedge clk) begin a9[17:9] <= a[17:9]; if (en) a9[8:0] <= a[8:0]; end
+  always @(posedge clk) begin a9[17:9] <= ra[17:9]; if (en) a9[8:0] <= ra[8:0]; end
   always @(posedge clk) mixed <= $signed(a9) * b1;
 endmodule
 """
@@ -136,7 +141,8 @@ def test_packed_registers_keep_every_product(tmp_path: Path) -> None:
     # parts, which meet adders); operands refused: a7 (reset and enable), a8 (a 1 beside a
     # reset), a9 (two enables), plain's product as chained's
     assert stats.outputs == 7, stats
-    for reason in ("unsupported reset", "tied to 1", "enables", "P: a product bit read"):
+    for reason in ("unsupported reset", "tied to 1", "enables", "P: a product bit read",
+                   "logic before"):
         assert any(reason in r for r in stats.refused), (reason, stats.refused)
 
 

@@ -142,6 +142,9 @@ MUTANTS = {
     # the rescale of the sums drops its rounding half when the new frame is not 0
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
                                  "{{ name }}_rb_q <= {{ s4 }} != '0", "{{ name }}_rb_q <= 1'b0"),
+    # a frame shift's carry (the bit under the new frame) never added
+    "moments-frame-carry": ("moments", "moments.sv.j2",
+                            "&& {{ name }}_xe[{{ j * F + F - 1 }}])", "&& 1'b0)"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
