@@ -69,16 +69,19 @@ def cmul(raw: np.ndarray, frac: int, c: Const) -> tuple[np.ndarray, int]:
 
 # ---- sample_cond -----------------------------------------------------------------------------
 def sample_cond(dp: Datapath, mu: np.ndarray, chol: np.ndarray, e: np.ndarray,
-                per_particle: bool = False) -> tuple[np.ndarray, np.ndarray | int]:
-    """x_i = mu_i + sum_{j<=i} L_ij e_j, one rounding per component. mu (n,), L (n, n), e (N, n);
-    or mu (N, n) and L (N, n, n), one per particle (runs stacked)."""
+                pairs: list[tuple[int, int]], per_particle: bool = False
+                ) -> tuple[np.ndarray, np.ndarray | int]:
+    """x_i = mu_i + sum_{j<=i} L_ij e_j over the covariance's pairs (L_ij of any other pair is 0
+    by construction, cholesky_batch, and takes no product), one rounding per component. mu (n,),
+    L (n, n), e (N, n); or mu (N, n) and L (N, n, n), one per particle (runs stacked)."""
     mu, chol = np.asarray(mu, dtype=np.int64), np.asarray(chol, dtype=np.int64)
     out = np.empty(e.shape, dtype=np.int64)
     flags = 0
+    kept = set(pairs)
     for i in range(dp.n):
         terms = [(mu[..., i], dp.x[i].frac_bits)]
         terms += [(chol[..., i, j] * e[:, j], dp.chol[i].frac_bits + dp.noise.frac_bits)
-                  for j in range(i + 1)]
+                  for j in range(i + 1) if (i, j) in kept]
         out[:, i], f = round_sum(terms, dp.x[i])
         flags |= f
     return out, _flags(flags, len(e), per_particle)

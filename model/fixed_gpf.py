@@ -145,7 +145,8 @@ class FixedGPF:
         runs, count, d = e.shape
         rows = np.repeat(np.arange(runs), count)            # each particle's run
         flat = e.reshape(runs * count, d)
-        cond, m1 = blocks.sample_cond(dp, mu[rows], chol[rows], flat[:, :n], per_particle=True)
+        cond, m1 = blocks.sample_cond(dp, mu[rows], chol[rows], flat[:, :n], self.pairs,
+                                      per_particle=True)
         prop, m2 = self._propagate(cond, flat[:, n:], inputs, rows)
         own = np.arange(runs)
         ref, m3 = self._propagate(mu, np.zeros((runs, d - n), np.int64), inputs, own)

@@ -581,14 +581,17 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
     n, noise = dp.n, dp.noise
     if noise.width > CONST_WIDTH:
         raise ValueError(f"sample_cond: the noise ({noise}) is wider than a multiplier operand")
-    pairs = [(i, j) for i in range(n) for j in range(i + 1)]      # L's row order
+    pairs = [(i, j) for i in range(n) for j in range(i + 1)]      # L's row order (the port)
+    # a pair outside the covariance's blocks has L_ij = 0 (cholesky): no product for it
+    kept = set(cov_pairs(dp, cfg.app_params.get("covariance", "full")))
     rows, leaves = [], []
     e_lo, e_hi = noise.min_raw, noise.max_raw
     for i in range(n):
         x, chol = dp.x[i], dp.chol[i]
         lo, hi = _product_range(chol, noise)
         terms = [(x.min_raw, x.max_raw, x.frac_bits)]
-        terms += [(lo, hi, chol.frac_bits + noise.frac_bits)] * (i + 1)
+        js = [j for j in range(i + 1) if (i, j) in kept]
+        terms += [(lo, hi, chol.frac_bits + noise.frac_bits)] * len(js)
         plan = _round_sum_plan(terms, x)
         mu_sh, p_sh = plan["shifts"][0], plan["shifts"][1]
         if mu_sh != plan["round_shift"]:
@@ -598,7 +601,7 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         row = [{"sig": f"mu{i}_q", "width": x.width, "shift": 0, "low_bits": mu_sh,
                 "low": plan["half"], "lo": (x.min_raw << mu_sh) + plan["half"],
                 "hi": (x.max_raw << mu_sh) + plan["half"]}]
-        for j in range(i + 1):
+        for j in js:
             if split:
                 h_lo, h_hi = chol.min_raw >> split, chol.max_raw >> split
                 hc = [a * b for a in (h_lo, h_hi) for b in (e_lo, e_hi)]
@@ -614,7 +617,7 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
                             "shift": p_sh, "low_bits": 0, "low": 0,
                             "lo": lo << p_sh, "hi": hi << p_sh})
         leaves.append(row)
-        rows.append({"x_width": x.width, "x_fmt": str(x), "chol_width": chol.width,
+        rows.append({"js": js, "x_width": x.width, "x_fmt": str(x), "chol_width": chol.width,
                      "chol_fmt": str(chol), "prod_width": row[1]["width"],
                      "split": split, "hi_width": chol.width - split,
                      "lo_prod_width": row[2]["width"] if split else 0, **plan})
@@ -639,6 +642,7 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         "op_width": offset, "mu_width": mu_w, "chol_width": offset - mu_w,
         "rows": rows, "mu_off": mu_off, "chol_off": chol_off, "x_off": x_off,
         "pairs": pairs, "levels": levels, "finals": finals,
+        "skipped": [f"L{i}{j}" for i, j in pairs if (i, j) not in kept],
     }
 
 
@@ -735,14 +739,13 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     t_ess_div = sq_steps + 2                          # W^2 done, then its dividend registered
     t_ess = t_ess_div + 1 + ess["qb"]
     t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
-    t_sig = 2 + max(d["qb"] for d in sig)             # the quotient, then q - m_i m_j registered
-    # m_i m_j: m_i registered, each DSP's operands, its DSP-sized partial products, their middle
-    # sum, the product
-    mm_lat = 5
-    t_load = max(t_sig, t_mean + mm_lat, t_ess)
-    # q - m_i m_j registered at c = QB + 1 (the quotient final): m_i m_j ready by then
-    if t_mean + mm_lat > 1 + min(d["qb"] for d in sig):
-        raise ValueError("moments: m_i m_j later than a Sigma quotient (not generated)")
+    # m_i m_j, the pairs in turn through one multiplier: the pair's slot, its selects, its
+    # operands picked, each DSP's own copy of them, the partial products, their middle sum, the
+    # product: pair r's from c = t_mean + mm_lat + r
+    mm_lat = 6
+    # q - m_i m_j registered a clock after both are final (the quotient at c = QB + 1)
+    t_sig = 1 + max(max(1 + d["qb"], t_mean + mm_lat + r) for r, d in enumerate(sig))
+    t_load = max(t_sig, t_ess)
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
         fq = dp.x[0].frac_bits

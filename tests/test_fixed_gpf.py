@@ -37,13 +37,17 @@ def quantise_sigma(dp, sigma: np.ndarray, pairs) -> dict:
     return {(i, j): math.floor(sigma[i, j] * 2.0 ** dp.cov_frac(i, j) + 0.5) for i, j in pairs}
 
 
+def lower(n: int) -> list[tuple[int, int]]:
+    return [(i, j) for i in range(n) for j in range(i + 1)]
+
+
 def test_sample_cond_is_exact() -> None:
     dp = datapath(BOT, WIDE)
     rng = np.random.default_rng(1)
     mu = rng.integers(-(1 << 18), 1 << 18, size=4)
     chol = np.tril(rng.integers(-(1 << 18), 1 << 18, size=(4, 4)))
     e = rng.integers(-(1 << 16), 1 << 16, size=(200, 4))
-    x, flags = blocks.sample_cond(dp, mu, chol, e)
+    x, flags = blocks.sample_cond(dp, mu, chol, e, lower(4))
     assert flags == 0
     for p in range(0, 200, 37):
         for i in range(4):
@@ -58,8 +62,25 @@ def test_sample_cond_saturates_with_flag() -> None:
     mu = np.full(4, dp.x[0].max_raw - 10)
     chol = np.eye(4, dtype=np.int64) * (1 << dp.chol[0].frac_bits)   # L = I
     e = np.full((3, 4), 1 << dp.noise.frac_bits)                       # e = 1
-    x, flags = blocks.sample_cond(dp, mu, chol, e)
+    x, flags = blocks.sample_cond(dp, mu, chol, e, lower(4))
     assert flags & Flag.SAT and np.all(x == dp.x[0].max_raw)
+
+
+def test_sample_cond_takes_only_the_covariance_pairs() -> None:
+    """uav "block": L_ij across the blocks is 0 from the Cholesky and takes no product; any
+    value there leaves x as it is, and an L of the blocks only gives the full sum's x."""
+    dp = datapath(UAV)
+    rng = np.random.default_rng(3)
+    block = blocks.cov_pairs(dp, "block")
+    mu = rng.integers(-(1 << 10), 1 << 10, size=7)
+    chol = np.tril(rng.integers(-(1 << 12), 1 << 12, size=(7, 7)))
+    e = rng.integers(-(1 << 14), 1 << 14, size=(50, 7))
+    zeroed = chol.copy()
+    zeroed[4:, :4] = 0
+    x, _ = blocks.sample_cond(dp, mu, chol, e, block)
+    assert np.array_equal(x, blocks.sample_cond(dp, mu, zeroed, e, block)[0])
+    assert np.array_equal(x, blocks.sample_cond(dp, mu, zeroed, e, lower(7))[0])
+    assert not np.array_equal(x, blocks.sample_cond(dp, mu, chol, e, lower(7))[0])
 
 
 def test_propagate_bot_is_exact() -> None:
@@ -374,7 +395,7 @@ def _line_rate_calls(rng: np.random.Generator) -> list:
     omega = rng.integers(uav.gyro.min_raw, uav.gyro.max_raw + 1, size=3)
     accel = rng.integers(uav.accel.min_raw, uav.accel.max_raw + 1, size=3)
     return [
-        ("sample_cond", lambda r, p: blocks.sample_cond(bot, mu, chol, e_bot[r, :4], p)),
+        ("sample_cond", lambda r, p: blocks.sample_cond(bot, mu, chol, e_bot[r, :4], lower(4), p)),
         ("propagate_bot", lambda r, p: blocks.propagate_bot(bot, x_bot[r], e_bot[r, 4:], p)),
         ("propagate_uav", lambda r, p: blocks.propagate_uav(uav, x_uav[r], e_uav[r, :6], omega,
                                                             accel, p)),

@@ -145,6 +145,10 @@ MUTANTS = {
     # a frame shift's carry (the bit under the new frame) never added
     "moments-frame-carry": ("moments", "moments.sv.j2",
                             "&& {{ name }}_xe[{{ j * F + F - 1 }}])", "&& 1'b0)"),
+    # m_i m_j (one multiplier, the pairs in turn) loaded into each pair's register a slot early
+    "moments-pair-slot": ("moments", "moments.sv.j2",
+                          "if (mms_q[{{ loop.index0 + mm_lat - 1 }}])",
+                          "if (mms_q[{{ loop.index0 + mm_lat - 2 }}])"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted

@@ -51,7 +51,12 @@ def step_operands(seen: dict[str, np.ndarray], n: int, beat: int) -> tuple[np.nd
     return mu, chol
 
 
-def sample_model(dp: Datapath):
+def kept_pairs(b: Bench) -> list[tuple[int, int]]:
+    """The covariance's pairs: the only L entries that take a product (the rest are 0)."""
+    return cov_pairs(datapath(b.cfg), b.cfg.app_params.get("covariance", "full"))
+
+
+def sample_model(dp: Datapath, kept: list[tuple[int, int]]):
     """Per step: sample_cond over all its beats and lanes; sat per particle."""
     n = dp.n
 
@@ -65,7 +70,7 @@ def sample_model(dp: Datapath):
             rows = steps == s
             mu, chol = step_operands(seen, n, int(np.argmax(rows)))
             flat = e[rows].reshape(-1, n)
-            out, flags = sample_cond(dp, mu, chol, flat, per_particle=True)
+            out, flags = sample_cond(dp, mu, chol, flat, kept, per_particle=True)
             x[rows] = out.reshape(-1, lanes, n)
             sat[rows] = (flags & Flag.SAT != 0).reshape(-1, lanes)
         return {**{f"x{i}": x[:, :, i] for i in range(n)}, "sat": sat}
@@ -78,7 +83,7 @@ def block(b: Bench, model=None) -> StreamBlock:
     ins, outs, ops = fields(dp)
     return StreamBlock("sample_cond", ins, outs, b.cfg.lanes,
                        b.manifest["modules"]["sample_cond"]["latency"],
-                       model or sample_model(dp), fields_op=ops)
+                       model or sample_model(dp, kept_pairs(b)), fields_op=ops)
 
 
 # ---- stimulus ---------------------------------------------------------------------------------
@@ -296,9 +301,9 @@ async def test_operands_change_while_busy(dut: SimHandleBase) -> None:
     sb.assert_clean()
 
 
-def wrong_rounding(dp: Datapath):
+def wrong_rounding(b: Bench):
     """Deliberately wrong model: x_0's LSB flipped wherever e_0 mod 7 == 3."""
-    right = sample_model(dp)
+    right = sample_model(datapath(b.cfg), kept_pairs(b))
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out = right(seen)
@@ -310,6 +315,6 @@ def wrong_rounding(dp: Datapath):
 @cocotb.test()
 async def test_corrupted_model_is_caught(dut: SimHandleBase) -> None:
     b = bench()
-    blk = block(b, wrong_rounding(datapath(b.cfg)))
+    blk = block(b, wrong_rounding(b))
     await check_corrupted_model_is_caught(dut, blk, b, random_inputs(b), random_operands(b))
 
