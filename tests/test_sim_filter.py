@@ -27,9 +27,11 @@ BUDGET = 256   # SPEC 9: a dependent step within N/LANES + 256 clocks
 # (config, simulator, lanes, steps, particles): Verilator builds are slow and runs fast, Icarus
 # the other way round. Short runs and faults build at -O0 (4-5 s less a build, the runs last a
 # second) and share the build of their (config, LANES, simulator) on one pytest -n worker.
+# Verilator builds the two whose builds the faults share; `odd` at LANES 2 and `uav` at LANES 1
+# run all five tests in make regress (test_filter_regression, 50 steps); in make test `odd` at
+# LANES 2 runs on Icarus (the faults), the uav filter at LANES 2 on both simulators.
 SHORT_OPT = "-O0"
-RUNS = [("bot", "verilator", 1, 5, 512), ("odd", "verilator", 2, 5, 512),
-        ("uav", "verilator", 1, 5, 512), ("uav_seed002", "verilator", 2, 5, 512),
+RUNS = [("bot", "verilator", 1, 5, 512), ("uav_seed002", "verilator", 2, 5, 512),
         ("bot", "icarus", 1, 3, 64), ("uav", "icarus", 2, 3, 64)]
 
 
