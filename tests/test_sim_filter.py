@@ -65,6 +65,13 @@ def check_run(result, res: dict, steps: int, particles: int, lanes: int, tests: 
         assert max(res["cycles_per_step"]) <= particles // lanes + BUDGET, res["cycles_per_step"]
 
 
+FILTER_TESTS = ("test_filter", "test_stalls", "test_reset_mid_step",
+                "test_particle_count_out_of_range", "test_corrupted_model_is_caught")
+# An N beyond the maximum runs a step of N = 2048: on Icarus the uav filter took 27 s for it
+# in a make test, 57 % of that run. The bot filter on Icarus and both on Verilator run it.
+SHORT_SKIPS = {("uav", "icarus", "test_particle_count_out_of_range")}
+
+
 def shared_build(config: str, sim: str, lanes: int) -> list:
     """The marks that put the runs of one build on one pytest -n worker (--dist loadgroup)."""
     marks = [pytest.mark.xdist_group(f"gpf-{config}-lanes{lanes}-{sim}")]
@@ -75,9 +82,10 @@ def shared_build(config: str, sim: str, lanes: int) -> list:
     pytest.param(*run, marks=shared_build(*run[:3]), id=f"{run[0]}-lanes{run[2]}-{run[1]}")
     for run in RUNS])
 def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: int) -> None:
+    tests = [t for t in FILTER_TESTS if (config, sim, t) not in SHORT_SKIPS]
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7,
-                             verilator_opt=SHORT_OPT)
-    check_run(result, res, steps, particles, lanes)
+                             testcase=",".join(tests), verilator_opt=SHORT_OPT)
+    check_run(result, res, steps, particles, lanes, tests=len(tests))
 
 
 @pytest.mark.regress
