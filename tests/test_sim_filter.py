@@ -46,8 +46,9 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
     out.unlink(missing_ok=True)
     spec = {"steps": steps, "particles": particles, "seed": seed, "out": str(out),
             "scenario": scenario, "stall": stall}
-    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10 \
-        and scenario is None
+    # the faults trace too: they share the short run's build, and Verilator rebuilds the
+    # whole model (20 s) when --trace comes or goes
+    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10
     result = run_sim(cfg, module, sim, waves=waves, seed=seed, testcase=testcase,
                      extra_env={"GPF_RUN": json.dumps(spec)}, build_root=build_root,
                      log_file=build_root / cfg.name / f"{module}-{sim}.log",
