@@ -70,7 +70,8 @@ test: $(STAMP)
 	$(BIN)/pytest -n $(JOBS) --dist loadgroup --junitxml=build/junit.xml
 
 regress: $(STAMP)
-	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py
+	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py \
+		tests/test_synth.py
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)

@@ -34,8 +34,10 @@ APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}  # default,
 def block_runs() -> list:
     """(module, sim, config, lanes) for every block. `make test`: Verilator runs the default
     config at LANES 1 and the odd one at 2, Icarus the default at 1 (with waves) and the odd one
-    at 2; a block of both applications also runs uav on each simulator. `make regress` adds
-    the rest of the Verilator matrix: the default config at LANES 2, the odd one at 1."""
+    at 2; a block of both applications also runs uav on Verilator and uav_seed002 on Icarus
+    (LANES 2), and its odd config on Icarus only in `make regress`: each simulator runs two
+    configs and both LANES of every block. `make regress` adds the rest of the Verilator
+    matrix: the default config at LANES 2, the odd one at 1."""
     runs = []
     for name, block in BLOCKS.items():
         if block.is_filter:   # the whole filters: tests/test_sim_filter.py
@@ -43,14 +45,15 @@ def block_runs() -> list:
         default, odd = APP_CONFIGS[block.apps[0]]
         combos = [("verilator", default, 1), ("verilator", default, 2), ("verilator", odd, 1),
                   ("verilator", odd, 2), ("icarus", default, 1), ("icarus", odd, 2)]
+        regress = {("verilator", default, 2), ("verilator", odd, 1)} if block.laned else set()
         if len(block.apps) > 1:
-            combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 1)]
+            combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 2)]
+            regress |= {("icarus", odd, 2), ("icarus", odd, 1)}
         if not block.laned:   # the same RTL at any LANES: LANES 1 only
             combos = sorted({(sim, config, 1) for sim, config, _ in combos})
         for sim, config, lanes in combos:
             marks = [SIM_MARKS[sim]] if SIM_MARKS[sim] else []
-            if block.laned and (sim, config, lanes) in {("verilator", default, 2),
-                                                        ("verilator", odd, 1)}:
+            if (sim, config, lanes) in regress:
                 marks.append(pytest.mark.regress)
             runs.append(pytest.param(name, sim, config, lanes, marks=marks,
                                      id=f"{name}-{config}-lanes{lanes}-{sim}"))
