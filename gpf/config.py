@@ -162,6 +162,11 @@ class Config:
     def weight(self) -> Format:
         return self.formats["weight"]
 
+    @property
+    def covariance(self) -> str:
+        """uav "block" (the [q] and [v] blocks of Sigma) or "full"; bot: "full"."""
+        return self.app_params.get("covariance", "full")
+
 
 def _type_name(kind: type | tuple[type, ...]) -> str:
     names = {int: "integer", float: "number", str: "string", list: "list"}

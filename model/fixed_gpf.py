@@ -55,7 +55,7 @@ class FixedGPF:
         if self.particles % cfg.lanes:
             raise ValueError(f"particles = {self.particles}: must be a multiple of "
                              f"lanes = {cfg.lanes}")
-        self.covariance = covariance or cfg.app_params.get("covariance", "full")
+        self.covariance = covariance or cfg.covariance
         self.pairs = blocks.cov_pairs(self.dp, self.covariance)
         self.ess_min = ess_threshold(self.dp, self.particles)
 

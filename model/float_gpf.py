@@ -117,7 +117,7 @@ class FloatGPF:
         self.particles = int(particles if particles is not None else cfg.particles)
         self.n = state_size(self.app)
         self.draws_per_particle = draw_count(self.app)
-        self.covariance: str = cfg.app_params.get("covariance", "full")
+        self.covariance: str = cfg.covariance
 
     def initial(self, scenario: Scenario | None = None) -> tuple[Array, Array]:
         """(mu0, Sigma0): the scenario's initial estimate, else the config's (bot: x0; uav:

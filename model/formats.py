@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 from gpf.config import Config
 from gpf.model.fixed import Format
@@ -106,7 +107,14 @@ class Datapath:
     def sigma(self, i: int, j: int) -> Format:
         """Sigma_ij: |Sigma_ij| <= max |dx_i| max |dx_j| < 2^(I_i + I_j) (Cauchy-Schwarz over
         saturated deviations), one more integer bit for rounding: 2W bits in all."""
-        return Format(True, self.x[i].int_bits + self.x[j].int_bits + 1, self.cov_frac(i, j))
+        return self._sigma_formats[(i, j)]
+
+    @cached_property
+    def _sigma_formats(self) -> dict[tuple[int, int], Format]:
+        """Every (i, j)'s Sigma format, built once: testbenches ask for them per matrix entry."""
+        return {(i, j): Format(True, self.x[i].int_bits + self.x[j].int_bits + 1,
+                               self.cov_frac(i, j))
+                for i in range(self.n) for j in range(self.n)}
 
     def draws(self) -> int:
         return {"bot": 6, "uav": 13}[self.app]

@@ -583,7 +583,7 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         raise ValueError(f"sample_cond: the noise ({noise}) is wider than a multiplier operand")
     pairs = [(i, j) for i in range(n) for j in range(i + 1)]      # L's row order (the port)
     # a pair outside the covariance's blocks has L_ij = 0 (cholesky): no product for it
-    kept = set(cov_pairs(dp, cfg.app_params.get("covariance", "full")))
+    kept = set(covariance_pairs(cfg))
     rows, leaves = [], []
     e_lo, e_hi = noise.min_raw, noise.max_raw
     for i in range(n):
@@ -696,7 +696,7 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     p_i dx_j / w, so |m_i| <= 2^(W-1+s); p = round(w dx 2^-k) adds at most N 2^(W-2) / W to
     S2 / W when k > 0 (W >= 1 raw)."""
     dp = datapath(cfg)
-    pairs = cov_pairs(dp, cfg.app_params.get("covariance", "full"))
+    pairs = covariance_pairs(cfg)
     word, n, nmax = dp.word, dp.n, cfg.particles
     wmax, xmin = dp.weight.max_raw, -(1 << (word - 1))
     guard = product_guard(dp)
@@ -792,8 +792,12 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         "ws_w": ws_w, "s1_w": s1_w, "s2_w": s2_w, "mean": mean, "sig": sig,
         "particles": nmax, "t_mean": t_mean, "t_sig": t_sig, "t_load": t_load,
         "t_w": max(1, (t_load + 1).bit_length()), "mm_lat": mm_lat, "prod_plan": prod_plan,
+        # the shared m_i m_j multiplier: the slots (pairs) in which mean i is operand a, b
+        "mm_slots": {side: [[r for r, pr in enumerate(pairs) if pr[k] == i] for i in range(n)]
+                     for k, side in enumerate("ab")},
+        "dsp_w": DSP_WIDTH,
         "fb": 4,                                      # accumulator frames: 2^fb, shifts by 16 k
-        "latency": acc_stages + t_load + 1, "covariance": cfg.app_params.get("covariance", "full"),
+        "latency": acc_stages + t_load + 1, "covariance": cfg.covariance,
     })
     return ctx
 
@@ -876,11 +880,10 @@ def weight_uav_context(cfg: Config) -> dict[str, Any]:
     return {**_weight_block(cfg, k, 1 + k["tail_latency"]), "v_first": 4}
 
 
-def cholesky_pairs(cfg: Config) -> list[tuple[int, int]]:
-    """The Sigma entries the Cholesky reads (input beat order): cov_pairs of the config."""
-    from gpf.model.blocks import cov_pairs
-
-    return cov_pairs(datapath(cfg), cfg.app_params.get("covariance", "full"))
+def covariance_pairs(cfg: Config) -> list[tuple[int, int]]:
+    """The Sigma entries kept (cov_pairs of the config): those the moments compute, the
+    Cholesky reads (its input beat order), and whose L entries sample_cond multiplies."""
+    return cov_pairs(datapath(cfg), cfg.covariance)
 
 
 def diagonal_blocks(n: int, pairs: list[tuple[int, int]]) -> list[tuple[int, int]]:
@@ -920,7 +923,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
 
     dp = datapath(cfg)
     n = dp.n
-    pairs = cholesky_pairs(cfg)
+    pairs = covariance_pairs(cfg)
     if any(i < j for i, j in pairs):
         raise ValueError("cholesky: pairs must be the lower triangle (i >= j)")
     w = dp.chol[0].width                        # L's word
@@ -969,7 +972,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
                      "a": i - core_of[i]["start"], "b": j - core_of[i]["start"],
                      "kept": (i, j) in pairs} for t, (i, j) in enumerate(lower)],
         "chol_fmts": [str(f) for f in dp.chol],
-        "covariance": cfg.app_params.get("covariance", "full"),
+        "covariance": cfg.covariance,
     }
 
 
@@ -982,7 +985,7 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
     and no shifter in the datapath. Only a term Sigma_ab c with any other c needs the multiplier
     (`has_mul`: one more stage; none in the shipped configs)."""
     dp = datapath(cfg)
-    pairs = cholesky_pairs(cfg)
+    pairs = covariance_pairs(cfg)
     program = prediction_terms(dp, pairs)
     top = max(term_frac(dp, pairs, t) for terms in program for t in terms)
     sigma_w = [dp.sigma(i, j).width for i, j in pairs]
@@ -1022,7 +1025,7 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         # the beat, every term through the program's register (and the multiplier's) and the
         # sum, the last rounding, the output register
         "latency": len(terms) + 3 + has_mul, "interval": len(terms) + 4 + has_mul,
-        "covariance": cfg.app_params.get("covariance", "full"),
+        "covariance": cfg.covariance,
     }
 
 

@@ -18,6 +18,7 @@ from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, RisingEdge
 
 from gpf.config import Config, load_config
+from gpf.model.blocks import cov_pairs
 from gpf.model.formats import Datapath, datapath
 
 CLOCK_NS = 10
@@ -37,6 +38,12 @@ class Bench:
     def dp(self) -> Datapath:
         """datapath(cfg), built once: it builds the primitives' tables, milliseconds a call."""
         return datapath(self.cfg)
+
+    @functools.cached_property
+    def pairs(self) -> list[tuple[int, int]]:
+        """The covariance's Sigma entries (cov_pairs): what moments, cholesky and sample_cond
+        compute with."""
+        return cov_pairs(self.dp, self.cfg.covariance)
 
     def rng(self, salt: str) -> random.Random:
         """An independent, replayable random stream for one purpose (stalls, stimulus, ...)."""

@@ -208,7 +208,7 @@ def test_predicted_sigma_is_one_rounding() -> None:
     rng = np.random.default_rng(13)
     for cfg in (BOT, UAV):
         dp = datapath(cfg)
-        pairs = blocks.cov_pairs(dp, cfg.app_params.get("covariance", "full"))
+        pairs = blocks.cov_pairs(dp, cfg.covariance)
         sig = random_spd(rng, dp.n, 0.05)
         raw = np.array([[quantise_sigma(dp, sig, pairs)[p] for p in pairs]])
         pred, flags = blocks.predicted_sigma(dp, raw, pairs)

@@ -99,7 +99,7 @@ def ref_step(cfg, mu, chol, inputs, draws):
     sigma = np.array([[s2[i][j] / big_w - m[i] * m[j] for j in range(n)] for i in range(n)])
     if cfg.app == "uav":
         new_mu[:4] /= math.sqrt(sum(v * v for v in new_mu[:4]))
-        if cfg.app_params["covariance"] == "block":
+        if cfg.covariance == "block":
             sigma[:4, 4:] = sigma[4:, :4] = 0.0
     return new_mu, sigma, np.linalg.cholesky(sigma)
 

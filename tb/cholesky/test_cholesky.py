@@ -11,10 +11,10 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 
 from gpf.model import blocks
-from gpf.model.blocks import Flag, cov_pairs
+from gpf.model.blocks import Flag
 from gpf.model.fixed import Format
 from gpf.model.formats import CHOL_FLOOR_LSB, CHOL_FLOOR_REL_BITS
-from gpf.rtl.generate import cholesky_context, cholesky_pairs
+from gpf.rtl.generate import cholesky_context, covariance_pairs
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
@@ -29,29 +29,12 @@ from gpf.tb.streaming import (
 FLAGS = Format.parse("u3.0")
 
 
-def pairs_of(b: Bench) -> list[tuple[int, int]]:
-    """cholesky_pairs(b.cfg) without building the datapath again (stimulus asks per matrix)."""
-    return cov_pairs(b.dp, b.cfg.app_params.get("covariance", "full"))
-
-
-# Sigma's format per pair, built once per bench: dp.sigma builds a Format on every call, and
-# the stimulus asks for each entry of each of 16,000 matrices
-_SIGMA_FORMATS: dict[int, tuple[Bench, dict[tuple[int, int], Format]]] = {}
-
-
-def sigma_formats(b: Bench) -> dict[tuple[int, int], Format]:
-    cached = _SIGMA_FORMATS.get(id(b))
-    if cached is None or cached[0] is not b:
-        cached = _SIGMA_FORMATS[id(b)] = (b, {p: b.dp.sigma(*p) for p in pairs_of(b)})
-    return cached[1]
-
-
 def lower(n: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(n) for j in range(i + 1)]
 
 
 def cholesky_model(b: Bench):
-    dp, pairs = b.dp, pairs_of(b)
+    dp, pairs = b.dp, b.pairs
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         # every beat in one call: the model's exact arithmetic is vectorised over matrices
@@ -66,9 +49,9 @@ def cholesky_model(b: Bench):
 
 
 def block(b: Bench, model=None) -> StreamBlock:
-    dp, pairs = b.dp, pairs_of(b)
+    dp, pairs = b.dp, b.pairs
     k = cholesky_context(b.cfg)
-    assert pairs == cholesky_pairs(b.cfg)
+    assert pairs == covariance_pairs(b.cfg)
     assert b.manifest["modules"]["cholesky"]["latency"] == k["latency"]
     fields_in = [Field(f"s{i}{j}", dp.sigma(i, j)) for i, j in pairs]
     fields_out = [Field(f"l{i}{j}", dp.chol[i]) for i, j in lower(dp.n)] + [Field("flags", FLAGS)]
@@ -81,8 +64,10 @@ def block(b: Bench, model=None) -> StreamBlock:
 # ---- stimulus: Sigma from a real L, quantised to Sigma's formats ------------------------------
 def to_raw(b: Bench, sigma: np.ndarray) -> dict[tuple[int, int], int]:
     """Real Sigma (n, n) -> raw entries of the pairs, rounded and clipped to their formats."""
+    dp = b.dp
     out = {}
-    for (i, j), fmt in sigma_formats(b).items():
+    for i, j in b.pairs:
+        fmt = dp.sigma(i, j)
         raw = math.floor(float(sigma[i, j]) * 2.0 ** fmt.frac_bits + 0.5) if math.isfinite(
             sigma[i, j]) else fmt.max_raw
         out[(i, j)] = min(max(raw, fmt.min_raw), fmt.max_raw)
@@ -138,7 +123,7 @@ def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]
     CHOL_FLOOR_LSB^2, or (half the time) a pair a, a+1 with L_aa = x, L_(a+1)a = y exactly
     (Sigma_aa = x^2, Sigma_(a+1)a = x y, |x|, |y| < 2^15 so L_(a+1)a = round(x y / x) = y) and
     Sigma_(a+1)(a+1) = y^2 + (y^2 >> REL) + delta: a pivot at the relative floor."""
-    dp, pairs = b.dp, pairs_of(b)
+    dp, pairs = b.dp, b.pairs
     fl = CHOL_FLOOR_LSB**2
     raw = {p: 0 for p in pairs}
     for j in range(dp.n):
@@ -151,13 +136,12 @@ def tiny_sigma(b: Bench, rng: np.random.Generator) -> dict[tuple[int, int], int]
         y *= int(rng.choice([-1, 1]))
         raw[(a, a)], raw[(a + 1, a)] = x * x, x * y
         raw[(a + 1, a + 1)] = y * y + ((y * y) >> CHOL_FLOOR_REL_BITS) + int(rng.integers(-2, 3))
-    fmts = sigma_formats(b)
-    return {p: min(max(v, fmts[p].min_raw), fmts[p].max_raw) for p, v in raw.items()}
+    return {p: min(max(v, dp.sigma(*p).min_raw), dp.sigma(*p).max_raw) for p, v in raw.items()}
 
 
 def stack(b: Bench, mats: list[dict[tuple[int, int], int]]) -> dict[str, np.ndarray]:
     return {f"s{i}{j}": np.array([[m[(i, j)]] for m in mats], dtype=np.int64)
-            for i, j in pairs_of(b)}
+            for i, j in b.pairs}
 
 
 async def run_matrices(dut: SimHandleBase, blk: StreamBlock, b: Bench,
@@ -193,7 +177,7 @@ def corner_sigmas(b: Bench) -> list[dict[tuple[int, int], int]]:
     """Zero, identity-like, the maximum diagonal (every L_jj saturates), the most negative
     entries, full-range off-diagonals (L_ij saturates), exact floor values, a negative pivot,
     rank one, and random matrices of every kind."""
-    dp, pairs = b.dp, pairs_of(b)
+    dp, pairs = b.dp, b.pairs
     fl = CHOL_FLOOR_LSB**2
     lw = dp.chol[0].width          # L's word
     rng = np.random.default_rng(b.rng("cholesky-corners").getrandbits(32))

@@ -17,9 +17,9 @@ import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
 
-from gpf.model.blocks import accumulate, cov_pairs, moments, reach_top, relative_weights
+from gpf.model.blocks import accumulate, moments, reach_top, relative_weights
 from gpf.model.fixed import Format, saturate
-from gpf.model.formats import SHIFT_BITS, Datapath, datapath
+from gpf.model.formats import SHIFT_BITS, Datapath
 from gpf.model.primitives import div_round
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
@@ -35,10 +35,6 @@ from gpf.tb.streaming import (
 FLAGS = Format(False, 3, 0)
 SHIFT = Field("shift", Format(False, SHIFT_BITS, 0))
 STALLS = [(0.0, 0.0), (0.3, 0.3), (0.1, 0.7), (0.7, 0.1)]
-
-
-def pairs_of(b: Bench) -> list[tuple[int, int]]:
-    return cov_pairs(datapath(b.cfg), b.cfg.app_params.get("covariance", "full"))
 
 
 def sigma_name(i: int, j: int) -> str:
@@ -65,7 +61,7 @@ def without_mean_product(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.n
 
 
 def moments_model(b: Bench, corrupt: bool = False):
-    dp, pairs = datapath(b.cfg), pairs_of(b)
+    dp, pairs = b.dp, b.pairs
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out: dict[str, list[int]] = {}
@@ -85,11 +81,11 @@ def moments_model(b: Bench, corrupt: bool = False):
 
 
 def block(b: Bench, model=None) -> StreamBlock:
-    dp = datapath(b.cfg)
+    dp = b.dp
     fields_in = [Field(f"x{i}", dp.x[i]) for i in range(dp.n)] + [Field("w", dp.weight)]
     fields_op = [Field(f"ref{i}", dp.x[i]) for i in range(dp.n)]
     fields_out = [Field(f"mu{i}", dp.x[i]) for i in range(dp.n)]
-    fields_out += [Field(sigma_name(i, j), dp.sigma(i, j)) for i, j in pairs_of(b)]
+    fields_out += [Field(sigma_name(i, j), dp.sigma(i, j)) for i, j in b.pairs]
     fields_out += [Field("flags", FLAGS), Field("ess", dp.ess)]
     return StreamBlock("moments", fields_in, fields_out, b.cfg.lanes,
                        b.manifest["modules"]["moments"]["latency"], model or moments_model(b),
@@ -102,7 +98,7 @@ class Steps:
     """Steps collected into the kit's shapes: inputs (beats, lanes), lasts, ops (steps,)."""
 
     def __init__(self, b: Bench):
-        self.dp = datapath(b.cfg)
+        self.dp = b.dp
         self.lanes = b.cfg.lanes
         self.max_beats = b.cfg.particles // b.cfg.lanes   # a step holds at most N particles
         self.x: list[np.ndarray] = []

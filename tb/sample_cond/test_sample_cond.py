@@ -9,7 +9,7 @@ from cocotb.handle import SimHandleBase
 
 from gpf.model.blocks import Flag, cholesky, cov_pairs, sample_cond
 from gpf.model.fixed import Format
-from gpf.model.formats import Datapath, datapath
+from gpf.model.formats import Datapath
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, unpack
 from gpf.tb.streaming import (
@@ -51,11 +51,6 @@ def step_operands(seen: dict[str, np.ndarray], n: int, beat: int) -> tuple[np.nd
     return mu, chol
 
 
-def kept_pairs(b: Bench) -> list[tuple[int, int]]:
-    """The covariance's pairs: the only L entries that take a product (the rest are 0)."""
-    return cov_pairs(datapath(b.cfg), b.cfg.app_params.get("covariance", "full"))
-
-
 def sample_model(dp: Datapath, kept: list[tuple[int, int]]):
     """Per step: sample_cond over all its beats and lanes; sat per particle."""
     n = dp.n
@@ -79,11 +74,11 @@ def sample_model(dp: Datapath, kept: list[tuple[int, int]]):
 
 
 def block(b: Bench, model=None) -> StreamBlock:
-    dp = datapath(b.cfg)
+    dp = b.dp
     ins, outs, ops = fields(dp)
     return StreamBlock("sample_cond", ins, outs, b.cfg.lanes,
                        b.manifest["modules"]["sample_cond"]["latency"],
-                       model or sample_model(dp, kept_pairs(b)), fields_op=ops)
+                       model or sample_model(dp, b.pairs), fields_op=ops)
 
 
 # ---- stimulus ---------------------------------------------------------------------------------
@@ -95,7 +90,7 @@ def normal_draws(rng: np.random.Generator, fmt: Format, shape: tuple[int, ...]) 
 
 def random_e(b: Bench, n: int, tag: str) -> np.ndarray:
     """(beats, lanes, n): 3/4 Gaussian draws, 1/4 uniform over the whole noise format."""
-    dp = datapath(b.cfg)
+    dp = b.dp
     rng = np.random.default_rng(b.rng(tag).getrandbits(32))
     shape = (n, b.cfg.lanes, dp.n)
     wide = rng.integers(dp.noise.min_raw, dp.noise.max_raw + 1, size=shape)
@@ -159,7 +154,7 @@ def operands_of(dp: Datapath, steps: list[tuple[np.ndarray, np.ndarray]]
 def random_operands(b: Bench) -> Operands:
     """Each step: realistic L (block or full covariance) half the time, raw extremes else;
     mu in the middle of the range mostly, over all of it a quarter of the time."""
-    dp = datapath(b.cfg)
+    dp = b.dp
     sigma0 = list(b.cfg.app_params["sigma0_diag"])
 
     def operands(steps: int, tag: str) -> dict[str, np.ndarray]:
@@ -172,7 +167,7 @@ def random_operands(b: Bench) -> Operands:
 
 
 def random_inputs(b: Bench) -> Inputs:
-    n = datapath(b.cfg).n
+    n = b.dp.n
 
     def inputs(beats: int, tag: str) -> dict[str, np.ndarray]:
         e = random_e(b, beats, tag)
@@ -195,7 +190,7 @@ async def test_random_beats(dut: SimHandleBase, stalls: tuple[float, float]) -> 
 def corner_steps(b: Bench) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(mu, L, e (beats, lanes, n)) per step: L = 0; e at its ends with L at its ends; mu at
     the ends with L e pushing out (both ways) and in; half-LSB ties; block and full L."""
-    dp = datapath(b.cfg)
+    dp = b.dp
     sigma0 = list(b.cfg.app_params["sigma0_diag"])
     n, lanes, noise = dp.n, b.cfg.lanes, dp.noise
     rng = np.random.default_rng(b.rng("sample_cond-corners").getrandbits(32))
@@ -254,7 +249,7 @@ async def test_corners(dut: SimHandleBase) -> None:
     happened both ways."""
     b = bench()
     blk = block(b)
-    dp = datapath(b.cfg)
+    dp = b.dp
     steps = corner_steps(b)
     e = np.concatenate([s[2] for s in steps])
     lasts = [beat == len(s[2]) - 1 for s in steps for beat in range(len(s[2]))]
@@ -303,7 +298,7 @@ async def test_operands_change_while_busy(dut: SimHandleBase) -> None:
 
 def wrong_rounding(b: Bench):
     """Deliberately wrong model: x_0's LSB flipped wherever e_0 mod 7 == 3."""
-    right = sample_model(datapath(b.cfg), kept_pairs(b))
+    right = sample_model(b.dp, b.pairs)
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out = right(seen)
