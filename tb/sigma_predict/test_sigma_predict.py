@@ -18,7 +18,6 @@ from gpf.rtl.generate import sigma_predict_context
 from gpf.tb.cholesky.test_cholesky import (
     check_wrong_model_caught,
     corner_sigmas,
-    pairs_of,
     random_inputs,
     run_matrices,
 )
@@ -30,7 +29,7 @@ FLAGS = Format.parse("u3.0")
 
 
 def predict_model(b: Bench, dp=None):
-    dp, pairs = dp or b.dp, pairs_of(b)
+    dp, pairs = dp or b.dp, b.pairs
 
     def model(seen: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         sigma = np.stack([seen[f"s{i}{j}"][:, 0] for i, j in pairs], axis=1)
@@ -43,7 +42,7 @@ def predict_model(b: Bench, dp=None):
 
 
 def block(b: Bench, model=None) -> StreamBlock:
-    dp, pairs = b.dp, pairs_of(b)
+    dp, pairs = b.dp, b.pairs
     k = sigma_predict_context(b.cfg)
     assert b.manifest["modules"]["sigma_predict"]["latency"] == k["latency"]
     fields_in = [Field(f"s{i}{j}", dp.sigma(i, j)) for i, j in pairs]
