@@ -89,6 +89,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # A power of two (a shift of N in hardware), or 0: never.
         "ess_min": Key((int, float), "0 or a power of two 2^-k, k = 0 .. 16 (a fraction of N)",
                        _ess_fraction, default=ESS_MIN_DEFAULT),
+        # the FPGA family the generated multipliers are shaped for: "xc7" (DSP48E1, 25 x 18
+        # signed) or "ecp5" (MULT18X18D, 18 x 18). Same arithmetic, bit for bit; only how a
+        # wide product is split into DSPs differs. `gpf synth` measures xc7, `gpf timing` ecp5.
+        "family": _choice("xc7", "ecp5", default="xc7"),
     },
     "formats": {
         # bot: one format for the whole state [px, vx, py, vy]; uav: quaternion and velocity
@@ -150,6 +154,7 @@ class Config:
     dt: float
     formats: dict[str, Format]
     ess_min: float
+    family: str
     grng: GrngConfig
     app_params: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)  # 'section.key' -> value
@@ -291,6 +296,7 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
         dt=float(flt["dt"]),
         formats=formats,
         ess_min=float(flt["ess_min"]),
+        family=flt["family"],
         grng=GrngConfig(**g),
         app_params=values[flt["app"]],
     )
@@ -327,6 +333,16 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Co
     name = path.stem + "".join(f"-{k.rpartition('.')[2]}{v}" for k, v in overrides.items())
     cfg = config_from_dict(doc, name=_safe_name(name), source=str(path))
     return replace(cfg, overrides=dict(overrides))
+
+
+def for_family(cfg: Config, family: str) -> Config:
+    """The same config with its multipliers shaped for another FPGA family (its own build
+    folder, e.g. build/bot-familyecp5): how `gpf synth` (xc7) and `gpf timing` (ecp5) measure
+    a config written for the other one, unless the user set the family."""
+    if cfg.family == family or "filter.family" in cfg.overrides:
+        return cfg
+    return replace(cfg, family=family, name=_safe_name(f"{cfg.name}-family{family}"),
+                   overrides={**cfg.overrides, "filter.family": family})
 
 
 def _safe_name(name: str) -> str:

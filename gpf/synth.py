@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gpf.config import Config
+from gpf.config import Config, for_family
 from gpf.rtl.generate import MODULES, generate
 from gpf.toolchain import ToolchainError
 
@@ -186,7 +186,9 @@ def area_from_stat(stat: dict, top: str) -> tuple[dict[str, float], dict[str, di
 
 def synthesize(cfg: Config, module: str, build_root: Path = Path("build"),
                timeout: float | None = None) -> Area:
-    """synth_xilinx on `module` of `cfg`; writes area.json beside Yosys's log and stat."""
+    """synth_xilinx on `module` of `cfg`, its multipliers shaped for xc7 (for_family); writes
+    area.json beside Yosys's log and stat."""
+    cfg = for_family(cfg, "xc7")
     folder = (build_root / cfg.name / "synth" / module).resolve()
     files = rtl_files(cfg, module, build_root)
     area = synth_files(files, MODULES[module].top, folder, timeout)

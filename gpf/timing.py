@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gpf.config import Config
+from gpf.config import Config, for_family
 from gpf.dsp_registers import pack_dsp_registers
 from gpf.rtl.generate import MODULES
 from gpf.synth import SynthError, read_sources, rtl_files, run_yosys
@@ -85,6 +85,7 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                     target_mhz: float = TARGET_MHZ, timeout: float | None = None,
                     seed: int = 1, dsp_registers: bool = True) -> Timing:
     top = MODULES[module].top
+    cfg = for_family(cfg, "ecp5")     # the multipliers shaped for the MULT18X18D
     folder = (build_root / cfg.name / "timing" / module).resolve()
     netlist, report, log = folder / "netlist.json", folder / "report.json", folder / "nextpnr.log"
     start = time.monotonic()

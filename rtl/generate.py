@@ -37,6 +37,9 @@ from gpf.rtl.filter import filter_context
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 DSP_WIDTH = 18         # an ECP5 MULT18X18D operand
+# the widest signed operand one multiplier takes beside an 18-bit one, per FPGA family
+# (config filter.family): a DSP48E1's 25 x 18, a MULT18X18D's 18 x 18
+DSP_WIDE_OPERAND = {"xc7": 25, "ecp5": 18}
 
 
 @dataclass(frozen=True)
@@ -575,7 +578,8 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
     product registered straight out of 18 x 18 multipliers (stage 1: an L entry wider than 18
     bits split into its signed top 18 bits and its unsigned low bits, two products) and again
     (stage 2), each component's exact terms summed two by two, one level a clock, and the sum
-    rounded half up and saturated (the last stage).
+    rounded half up and saturated (the last stage). On xc7 an L entry of up to 25 bits is one
+    DSP48E1 product (L on its 25-bit port, e on the 18-bit one).
     The same exact sum and one rounding as the model: only where registers sit moves."""
     dp = datapath(cfg)
     n, noise = dp.n, dp.noise
@@ -596,7 +600,8 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         mu_sh, p_sh = plan["shifts"][0], plan["shifts"][1]
         if mu_sh != plan["round_shift"]:
             raise ValueError("sample_cond: mu is not at the rounding's LSB")
-        split = max(0, chol.width - CONST_WIDTH)     # L's low bits in a product of their own
+        # L's low bits in a product of their own where one multiplier cannot take L whole
+        split = max(0, chol.width - DSP_WIDE_OPERAND[cfg.family])
         # mu with the half LSB below it: the rounding constant costs no adder
         row = [{"sig": f"mu{i}_q", "width": x.width, "shift": 0, "low_bits": mu_sh,
                 "low": plan["half"], "lo": (x.min_raw << mu_sh) + plan["half"],
@@ -643,6 +648,7 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
         "rows": rows, "mu_off": mu_off, "chol_off": chol_off, "x_off": x_off,
         "pairs": pairs, "levels": levels, "finals": finals,
         "skipped": [f"L{i}{j}" for i, j in pairs if (i, j) not in kept],
+        "family": cfg.family, "wide_port": DSP_WIDE_OPERAND[cfg.family],
     }
 
 
@@ -763,22 +769,31 @@ def moments_context(cfg: Config) -> dict[str, Any]:
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
     # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
     acc_stages = 9
-    # p dx_j as DSP-sized partial products (one 18 x 18 each on ECP5, one DSP48E1 each on
-    # xc7), summed with the lanes: dx split into an unsigned low 18 bits and a small signed top
-    # (a shift-and-add, no multiplier) when wider than 18; p into unsigned 18-bit pieces (17
-    # beside dx's unsigned low part: xc7 multiplies 25 x 18 signed) and a signed top
-    b_split = word > 18
-    step = 17 if b_split else 18
+    # p dx_j as DSP-sized partial products (one multiplier each), summed with the lanes: p in
+    # unsigned pieces and a signed top, dx whole or, when wider than a port, as its unsigned
+    # low bits (bl) and a small signed top (a shift-and-add, no multiplier). ECP5: pieces of
+    # 18 bits (17 beside dx's low 18); xc7: p on the DSP48E1's 25-bit port in 24-bit pieces,
+    # dx on the 18-bit one (uav: 38-bit p in two pieces, not three)
+    if cfg.family == "xc7":
+        b_split, top, step, bl = word > 18, 25, 24, 17
+    else:
+        b_split, top, step, bl = word > 18, 18, 17 if word > 18 else 18, 18
     pieces, lo = [], 0
-    while p_w - lo > 18:
+    while p_w - lo > top:
         pieces.append({"lo": lo, "hi": lo + step, "signed": False})
         lo += step
     pieces.append({"lo": lo, "hi": p_w, "signed": True})
     for pc in pieces:
         aw = pc["hi"] - pc["lo"] + (0 if pc["signed"] else 1)
-        pc["w"] = aw + (19 if b_split else word)      # exact signed product width
-    prod_plan = {"pieces": pieces, "b_split": b_split, "hb": word - 18 if b_split else 0,
-                 "hw": p_w + word - 18 if b_split else 0}
+        pc["w"] = aw + (bl + 1 if b_split else word)  # exact signed product width
+    # xc7: an 18-bit unsigned w (u1.17) is 19 bits signed, one past the DSP48E1's 18-bit port:
+    # its top bit (set only for w = 1) apart, as a shifted add, where the other operand cannot
+    # take that port (w dx with a 19..25-bit dx; w^2)
+    ww = dp.weight.width
+    w_top = {"ww": cfg.family == "xc7" and ww == 18,
+             "wdx": cfg.family == "xc7" and ww == 18 and 18 < word <= 25}
+    prod_plan = {"pieces": pieces, "b_split": b_split, "bl": bl,
+                 "hb": word - bl if b_split else 0, "hw": p_w + word - bl if b_split else 0}
     ctx.update({
         "lanes": cfg.lanes, "n": n, "word": word, "ww": dp.weight.width,
         "x_fmts": [str(f) for f in dp.x], "w_fmt": str(dp.weight),
@@ -791,7 +806,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         "guard": guard, "k": k, "wdx_w": wdx_w, "p_w": p_w, "prod_w": prod_w,
         "ws_w": ws_w, "s1_w": s1_w, "s2_w": s2_w, "mean": mean, "sig": sig,
         "particles": nmax, "t_mean": t_mean, "t_sig": t_sig, "t_load": t_load,
-        "t_w": max(1, (t_load + 1).bit_length()), "mm_lat": mm_lat, "prod_plan": prod_plan,
+        "t_w": max(1, (t_load + 1).bit_length()), "mm_lat": mm_lat,
+        "prod_plan": prod_plan, "w_top": w_top,
         # the shared m_i m_j multiplier: the slots (pairs) in which mean i is operand a, b
         "mm_slots": {side: [[r for r, pr in enumerate(pairs) if pr[k] == i] for i in range(n)]
                      for k, side in enumerate("ab")},
@@ -936,9 +952,18 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     acc_w = max(sw, 2 * w - 1) + max(1, math.ceil(math.log2(n))) + 1
     sq = math.ceil(w / 2)                       # root clocks: 2 SQ >= W root bits of 4 d
     qs = math.ceil((w - 1) / 2)                 # quotient clocks: |L_ij| < 2^(W-1) unsaturated
+    # a W x W product: whole (W <= 18); on xc7 (W <= 25) a L_jk's two parts, unsigned low LO and
+    # signed top bits, each times a whole (one DSP48E1 each); else four 18 x 18 parts
+    if w <= DSP_WIDTH:
+        parts = "whole"
+    elif cfg.family == "xc7" and w <= DSP_WIDE_OPERAND["xc7"]:
+        parts = "two"
+    else:
+        parts = "four"
     cores = []
     for start, size in diagonal_blocks(n, pairs):
-        terms = 1 + (size - 1) * (3 if w > DSP_WIDTH else 1)  # S_aj, products whole or in parts
+        # S_aj and the products' terms in the adder tree ("four": {hh, ll} one term)
+        terms = 1 + (size - 1) * {"whole": 1, "two": 2, "four": 3}[parts]
         levels = max(1, math.ceil(math.log2(terms)))
         p = 2 + levels                          # operands, products, the adder tree
         # L_jj when the root is done and the last row's dot product is in
@@ -959,7 +984,8 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     core_of = {i: c for c in cores for i in range(c["start"], c["start"] + c["n"])}
     return {
         "lanes": cfg.lanes, "latency": latency, "interval": latency,
-        "n": n, "w": w, "sw": sw, "acc_w": acc_w, "dsp_w": DSP_WIDTH, "sq": sq, "qs": qs,
+        "n": n, "w": w, "sw": sw, "acc_w": acc_w, "dsp_w": DSP_WIDTH, "parts": parts,
+        "sq": sq, "qs": qs,
         "dg": 2 * sq,
         "qb": 2 * qs, "cores": cores, "core_kinds": kinds,
         "floor_min": CHOL_FLOOR_LSB**2, "floor_rel_bits": CHOL_FLOOR_REL_BITS,

@@ -80,3 +80,36 @@ def test_four_lanes_generate_and_lint(tmp_path: Path, config: str) -> None:
         assert not problems, problems
     # a tool told to write to /dev/null may chmod it (iverilog does, as root), breaking apt
     assert os.stat(os.devnull).st_mode == devnull_mode, "lint changed /dev/null's mode"
+
+
+@pytest.mark.parametrize("config", ["bot", "uav", "uav_seed002"])
+def test_multipliers_shaped_for_the_family(config: str) -> None:
+    """xc7 takes an L entry of up to 25 bits and p's 24-bit pieces on a DSP48E1's wide port;
+    ecp5 splits them for its 18 x 18. Both shapes are simulated bit for bit (bot, uav: xc7;
+    odd: ecp5); here, that each config gets the shape of the family it names."""
+    from gpf.config import for_family
+    from gpf.rtl.generate import (
+        DSP_WIDE_OPERAND,
+        cholesky_context,
+        moments_context,
+        sample_cond_context,
+    )
+
+    xc7 = load_config(f"configs/{config}.toml")
+    ecp5 = for_family(xc7, "ecp5")
+    assert (xc7.family, ecp5.family, ecp5.name) == ("xc7", "ecp5", f"{config}-familyecp5")
+    for cfg in (xc7, ecp5):
+        port = DSP_WIDE_OPERAND[cfg.family]
+        for row in sample_cond_context(cfg)["rows"]:
+            assert row["split"] == max(0, row["chol_width"] - port)
+            assert row["chol_width"] - row["split"] <= port
+        plan = moments_context(cfg)["prod_plan"]
+        unsigned = cfg.family == "ecp5"     # a MULT18X18D operand may be unsigned
+        for pc in plan["pieces"]:           # every piece one multiplier's operand
+            assert pc["hi"] - pc["lo"] + (0 if pc["signed"] or unsigned else 1) <= port
+    assert all(r["split"] for r in sample_cond_context(ecp5)["rows"])   # L: 22 to 25 bits
+    assert not any(r["split"] for r in sample_cond_context(xc7)["rows"])
+    # L_ik L_jk (22 to 25 bits): two DSP48E1 products on xc7, four 18 x 18 parts on ecp5
+    assert [cholesky_context(c)["parts"] for c in (xc7, ecp5)] == ["two", "four"]
+    if config == "uav":       # 38-bit p: two pieces on xc7, three on ecp5
+        assert [len(moments_context(c)["prod_plan"]["pieces"]) for c in (xc7, ecp5)] == [2, 3]
