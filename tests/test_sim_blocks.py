@@ -190,11 +190,20 @@ MUTANTS = {
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
     "cholesky-pivot-sub": ("cholesky", "cholesky_core.sv.j2", "assign lv0[{{ 3 * k + 1 }}] = -(",
                            "assign lv0[{{ 3 * k + 1 }}] = +("),
+    # the same two on the xc7 shape (a product as a bL + a bH 2^LO): the pivot's a aH a LSB
+    # too high, a dot product's a bL added
+    "cholesky-pivot-square-xc7": ("cholesky", "cholesky_core.sv.j2",
+                                  "2 * w - lo, acc_w) }} <<< LO;",
+                                  "2 * w - lo, acc_w) }} <<< (LO + 1);"),
+    "cholesky-pivot-sub-xc7": ("cholesky", "cholesky_core.sv.j2",
+                               "assign lv0[{{ 2 * k + 1 }}] = -(",
+                               "assign lv0[{{ 2 * k + 1 }}] = +("),
 }
 
 
-# mutants that only a config other than the module's first application's catches
-MUTANT_CONFIG: dict[str, str] = {}
+# mutants that only a config other than the module's first application's catches: the
+# 18 x 18 parts are the ecp5 shape (odd), bot's is xc7's
+MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-pivot-sub": "odd"}
 
 
 def mutated_templates(tmp_path: Path, mutant: str, template: str, old: str, new: str) -> Path:
