@@ -774,10 +774,11 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     # low bits (bl) and a small signed top (a shift-and-add, no multiplier). ECP5: pieces of
     # 18 bits (17 beside dx's low 18); xc7: p on the DSP48E1's 25-bit port in 24-bit pieces,
     # dx on the 18-bit one (uav: 38-bit p in two pieces, not three)
+    b_split, top = word > DSP_WIDTH, DSP_WIDE_OPERAND[cfg.family]
     if cfg.family == "xc7":
-        b_split, top, step, bl = word > 18, 25, 24, 17
+        step, bl = top - 1, DSP_WIDTH - 1
     else:
-        b_split, top, step, bl = word > 18, 18, 17 if word > 18 else 18, 18
+        step, bl = DSP_WIDTH - 1 if b_split else DSP_WIDTH, DSP_WIDTH
     pieces, lo = [], 0
     while p_w - lo > top:
         pieces.append({"lo": lo, "hi": lo + step, "signed": False})
