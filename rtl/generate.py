@@ -791,8 +791,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     # its top bit (set only for w = 1) apart, as a shifted add, where the other operand cannot
     # take that port (w dx with a 19..25-bit dx; w^2)
     ww = dp.weight.width
-    w_top = {"ww": cfg.family == "xc7" and ww == 18,
-             "wdx": cfg.family == "xc7" and ww == 18 and 18 < word <= 25}
+    w_top_apart = cfg.family == "xc7" and ww == DSP_WIDTH
+    w_top = {"ww": w_top_apart,
+             "wdx": w_top_apart and DSP_WIDTH < word <= DSP_WIDE_OPERAND["xc7"]}
     prod_plan = {"pieces": pieces, "b_split": b_split, "bl": bl,
                  "hb": word - bl if b_split else 0, "hw": p_w + word - bl if b_split else 0}
     ctx.update({
@@ -957,7 +958,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     # signed top bits, each times a whole (one DSP48E1 each); else four 18 x 18 parts
     if w <= DSP_WIDTH:
         parts = "whole"
-    elif cfg.family == "xc7" and w <= DSP_WIDE_OPERAND["xc7"]:
+    elif w <= DSP_WIDE_OPERAND[cfg.family]:
         parts = "two"
     else:
         parts = "four"
