@@ -285,10 +285,32 @@ class Sums:
     p_guard: int            # p_i = w dx_i keeps this many bits below x_i's LSB
 
 
+# p = w dx rounded to at most this many bits (signed): one multiplier operand, the DSP48E1's
+# 25-bit port (two 18-bit parts on ECP5), so S2's p_i dx_j is one product a pair at line rate
+P_BITS = 25
+
+
+def product_max(dp: Datapath, guard: int) -> int:
+    """Largest |p|, p = round(w dx 2^-(weight fraction - guard)), over the formats' extremes."""
+    k = dp.weight.frac_bits - guard
+    return (dp.weight.max_raw * (1 << (dp.word - 1)) + ((1 << k) >> 1)) >> k
+
+
+def product_width(dp: Datapath, guard: int) -> int:
+    """Signed width of p (product_max)."""
+    return product_max(dp, guard).bit_length() + 1
+
+
 def product_guard(dp: Datapath) -> int:
-    """Guard bits of p = w dx: as many as keep p dx within 62 bits (at most the weight's
-    fraction, where p is exact). Small weights would otherwise round p to nothing."""
-    return max(0, min(dp.weight.frac_bits, 62 - 2 * dp.word))
+    """Guard bits of p = w dx below x's LSB: as many as keep p within P_BITS (and p dx within 62
+    bits), at most the weight's fraction (p exact). The rounding error, under half a guard LSB
+    of dx a particle and of either sign, is far below the covariance's own sampling error
+    (Monte Carlo: README "Quality against float64"); too few guard bits would round small
+    weights' p to nothing."""
+    guard = max(0, min(dp.weight.frac_bits, 62 - 2 * dp.word))
+    while guard > 0 and product_width(dp, guard) > P_BITS:
+        guard -= 1
+    return guard
 
 
 def round_shift(acc: np.ndarray, shift: np.ndarray) -> np.ndarray:

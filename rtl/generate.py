@@ -26,6 +26,7 @@ from gpf.model.blocks import (
     cov_pairs,
     prediction_terms,
     product_guard,
+    product_max,
     reach_top,
     term_frac,
 )
@@ -708,7 +709,7 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     guard = product_guard(dp)
     k = dp.weight.frac_bits - guard                   # p = round(w dx 2^-k)
     wdx_w = _sbits(wmax * -xmin)
-    p_max = (wmax * -xmin + (1 << k >> 1)) >> k
+    p_max = product_max(dp, guard)
     p_w = _sbits(p_max)
     prod_w = _sbits(p_max * -xmin)
     ws_w = (nmax * wmax).bit_length()                 # unsigned sum of weights
@@ -769,16 +770,13 @@ def moments_context(cfg: Config) -> dict[str, Any]:
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
     # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
     acc_stages = 9
-    # p dx_j as DSP-sized partial products (one multiplier each), summed with the lanes: p in
-    # unsigned pieces and a signed top, dx whole or, when wider than a port, as its unsigned
-    # low bits (bl) and a small signed top (a shift-and-add, no multiplier). ECP5: pieces of
-    # 18 bits (17 beside dx's low 18); xc7: p on the DSP48E1's 25-bit port in 24-bit pieces,
-    # dx on the 18-bit one (uav: 38-bit p in two pieces, not three)
+    # p dx_j as DSP-sized partial products (one multiplier each, both operands within its
+    # signed ports), summed with the lanes: p whole on the wide port (xc7: P_BITS fits the
+    # DSP48E1's 25) or in unsigned pieces and a signed top (ECP5: 17 + 8 bits), dx whole or,
+    # when wider than the 18-bit port, as its 17 unsigned low bits (bl) and a small signed
+    # top (a shift-and-add, no multiplier)
     b_split, top = word > DSP_WIDTH, DSP_WIDE_OPERAND[cfg.family]
-    if cfg.family == "xc7":
-        step, bl = top - 1, DSP_WIDTH - 1
-    else:
-        step, bl = DSP_WIDTH - 1 if b_split else DSP_WIDTH, DSP_WIDTH
+    step, bl = top - 1, DSP_WIDTH - 1
     pieces, lo = [], 0
     while p_w - lo > top:
         pieces.append({"lo": lo, "hi": lo + step, "signed": False})

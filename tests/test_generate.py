@@ -84,7 +84,7 @@ def test_four_lanes_generate_and_lint(tmp_path: Path, config: str) -> None:
 
 @pytest.mark.parametrize("config", ["bot", "uav", "uav_seed002"])
 def test_multipliers_shaped_for_the_family(config: str) -> None:
-    """xc7 takes an L entry of up to 25 bits and p's 24-bit pieces on a DSP48E1's wide port;
+    """xc7 takes an L entry of up to 25 bits and p (P_BITS) on a DSP48E1's wide port;
     ecp5 splits them for its 18 x 18. Both shapes are simulated bit for bit (bot, uav: xc7;
     odd: ecp5); here, that each config gets the shape of the family it names."""
     from gpf.config import for_family
@@ -104,12 +104,13 @@ def test_multipliers_shaped_for_the_family(config: str) -> None:
             assert row["split"] == max(0, row["chol_width"] - port)
             assert row["chol_width"] - row["split"] <= port
         plan = moments_context(cfg)["prod_plan"]
-        unsigned = cfg.family == "ecp5"     # a MULT18X18D operand may be unsigned
-        for pc in plan["pieces"]:           # every piece one multiplier's operand
-            assert pc["hi"] - pc["lo"] + (0 if pc["signed"] or unsigned else 1) <= port
+        for pc in plan["pieces"]:           # every piece one multiplier's signed operand
+            assert pc["hi"] - pc["lo"] + (0 if pc["signed"] else 1) <= port
+        dx_port = plan["bl"] + 1 if plan["b_split"] else moments_context(cfg)["word"]
+        assert dx_port <= DSP_WIDE_OPERAND["ecp5"]          # dx (its low part) on the 18-bit port
     assert all(r["split"] for r in sample_cond_context(ecp5)["rows"])   # L: 22 to 25 bits
     assert not any(r["split"] for r in sample_cond_context(xc7)["rows"])
     # L_ik L_jk (22 to 25 bits): two DSP48E1 products on xc7, four 18 x 18 parts on ecp5
     assert [cholesky_context(c)["parts"] for c in (xc7, ecp5)] == ["two", "four"]
-    if config == "uav":       # 38-bit p: two pieces on xc7, three on ecp5
-        assert [len(moments_context(c)["prod_plan"]["pieces"]) for c in (xc7, ecp5)] == [2, 3]
+    # p within P_BITS = 25: one DSP48E1 product a pair on xc7, two 18 x 18 on ecp5
+    assert [len(moments_context(c)["prod_plan"]["pieces"]) for c in (xc7, ecp5)] == [1, 2]

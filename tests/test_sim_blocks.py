@@ -152,6 +152,9 @@ MUTANTS = {
     "moments-pair-slot": ("moments", "moments.sv.j2",
                           "if (mms_q[{{ loop.index0 + mm_lat - 1 }}])",
                           "if (mms_q[{{ loop.index0 + mm_lat - 2 }}])"),
+    # p = w dx truncated to P_BITS instead of rounded half up
+    "moments-p-rounding": ("moments", "moments.sv.j2",
+                           "{{ wdx_w }}'sd{{ 2 ** (k - 1) }};", "{{ wdx_w }}'sd0;"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
