@@ -287,19 +287,24 @@ def _round_sum(base: str, terms: list[tuple[int, _Sig]], width: int, frac: int
                "copied": False}   # only copies registered (_operand_copies)
 
 
-def _split_products(lines: list[dict[str, Any]]
+def _split_products(lines: list[dict[str, Any]], wide: int
                     ) -> tuple[list[dict], dict[str, list[tuple[str, int, int]]]]:
     """A stage of products as their parts, each registered: a_hi b_hi (a_hi, b_hi: the
     operands' signed top DSP_WIDTH bits) alone on its multiplier, the parts with the operands'
     low bits (k <= 2 bits) in shifted adds; and for each product (by its name) its parts
     (name, width, shift): the sums that take the product take its parts (_split_sum). A
     multiplier's output and an adder in one clock, and four multipliers per 20 x 20 product
-    spread over the die, held propagate_uav to 54 MHz."""
+    spread over the die, held propagate_uav to 54 MHz. With a wide port (`wide` bits, xc7's
+    25), the operand with more low bits to spare goes on it whole: one shifted add at most."""
     pre, parts = [], {}
     for ln in lines:
         a, aw, b, bw, w = ln["a"], ln["aw"], ln["b"], ln["bw"], ln["w"]
         base = ln["name"].removesuffix("_q")
         ka, kb = max(0, aw - DSP_WIDTH), max(0, bw - DSP_WIDTH)
+        if ka >= kb and aw <= wide:
+            ka = 0
+        elif bw <= wide:
+            kb = 0
         if ka > 2 or kb > 2:     # (24-bit words): the whole product
             pre.append({"reg": f"{base}_h", "w": w, "expr": f"{w}'({a}) * {w}'({b})"})
             parts[ln["name"]] = [(f"{base}_h", w, 0)]
@@ -497,7 +502,7 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     for prods, sums in ((s1, s2), (s3, s4), (s5, s6)):
         if stages:
             _operand_copies(prods, stages[-1])
-        pre, parts = _split_products(prods)
+        pre, parts = _split_products(prods, DSP_WIDE_OPERAND[cfg.family])
         stages += [pre, *_split_sums(sums, parts)]
     return {
         "lanes": cfg.lanes, "latency": len(stages),
@@ -766,7 +771,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         t_sqrt = t_mean + 4
         t_qdiv = t_sqrt + 1 + rb + 1                  # the dividends' norm terms registered
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
-        ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2,
+        # xc7: mu_i on the DSP48E1's wide port, one product a square (its top bits a shifted add)
+        sq_wide = DSP_WIDTH < word <= DSP_WIDE_OPERAND[cfg.family]
+        ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2, sq_wide=sq_wide,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
     # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
     acc_stages = 9
@@ -849,9 +856,10 @@ def _whiten_context(cfg: Config, d_fracs: list[int]) -> dict[str, Any]:
         "sq_width": sq_width, "sum_width": sq_width + (terms - 1).bit_length() + 1,
         "t_shift": t_shift, "t_width": t.width, "t_fmt": str(t), "t_max": t.max_raw,
         "t_frac": t.frac_bits, "w_width": dp.weight.width, "w_fmt": str(dp.weight),
-        # operands wider than a DSP's 18 bits: d c_u and u^2 split (u^2's parts summed in a
-        # stage D2 of its own)
-        "d_split": max(0, dp.word - DSP_WIDTH), "u_split": max(0, u.width - DSP_WIDTH),
+        # operands wider than a DSP's port: d c_u split (d on xc7's wide port whole), u^2 (u
+        # on both ports) split past 18 bits (its parts summed in a stage D2 of its own)
+        "d_split": max(0, dp.word - DSP_WIDE_OPERAND[cfg.family]),
+        "u_split": max(0, u.width - DSP_WIDTH),
         # stages after the innovation d: product, u, squares (and D2), t
         "tail_latency": 4 + (u.width > DSP_WIDTH),
         # the block's relative weights: stage M (running minimum), then the exp lanes

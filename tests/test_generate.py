@@ -92,7 +92,9 @@ def test_multipliers_shaped_for_the_family(config: str) -> None:
         DSP_WIDE_OPERAND,
         cholesky_context,
         moments_context,
+        propagate_uav_context,
         sample_cond_context,
+        weight_uav_context,
     )
 
     xc7 = load_config(f"configs/{config}.toml")
@@ -112,5 +114,14 @@ def test_multipliers_shaped_for_the_family(config: str) -> None:
     assert not any(r["split"] for r in sample_cond_context(xc7)["rows"])
     # L_ik L_jk (22 to 25 bits): two DSP48E1 products on xc7, four 18 x 18 parts on ecp5
     assert [cholesky_context(c)["parts"] for c in (xc7, ecp5)] == ["two", "four"]
+    # uav's propagate and weight: a 20-bit operand whole on xc7's 25-bit port, no part of its
+    # low bits in fabric; ecp5 splits it (a_hi b_hi and the low bits' shifted adds)
+    if config == "uav":
+        def low_parts(c):
+            return sum(st["reg"].endswith(("_la", "_lb")) for stage in
+                       propagate_uav_context(c)["stages"] for st in stage if "reg" in st)
+        xc7_parts, ecp5_parts = low_parts(xc7), low_parts(ecp5)
+        assert ecp5_parts > 2 * xc7_parts > 0
+        assert [weight_uav_context(c)["d_split"] for c in (xc7, ecp5)] == [0, 2]
     # p within P_BITS = 25: one DSP48E1 product a pair on xc7, two 18 x 18 on ecp5
     assert [len(moments_context(c)["prod_plan"]["pieces"]) for c in (xc7, ecp5)] == [1, 2]

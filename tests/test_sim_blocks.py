@@ -31,6 +31,11 @@ def waves_possible(sim: str) -> bool:
 APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}  # default, odd words
 
 
+# blocks whose uav RTL has an ecp5 shape that odd (bot's words, ecp5) does not reach: the uav
+# configs are xc7, so these also run uav in its ecp5 shape
+UAV_ECP5_RUNS = {"propagate_uav", "weight_uav", "moments"}
+
+
 def block_runs() -> list:
     """(module, sim, config, lanes) for every block. `make test`: Verilator runs the default
     config at LANES 1 and the odd one at 2, Icarus the default at 1 (with waves) and the odd one
@@ -49,6 +54,8 @@ def block_runs() -> list:
         if len(block.apps) > 1:
             combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 2)]
             regress |= {("icarus", odd, 2), ("icarus", odd, 1)}
+        if name in UAV_ECP5_RUNS:
+            combos.append(("verilator", "uav-familyecp5", 1))
         if not block.laned:   # the same RTL at any LANES: LANES 1 only
             combos = sorted({(sim, config, 1) for sim, config, _ in combos})
         for sim, config, lanes in combos:
@@ -67,7 +74,9 @@ ICARUS_LEVEL = "short"
 
 @pytest.mark.parametrize("module,sim,config,lanes", block_runs())
 def test_block(module: str, sim: str, config: str, lanes: int) -> None:
-    cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
+    name, _, family = config.partition("-family")
+    cfg = load_config(f"configs/{name}.toml",
+                      {"filter.lanes": lanes, **({"filter.family": family} if family else {})})
     waves = config == APP_CONFIGS[BLOCKS[module].apps[0]][0] and lanes == 1 and \
         waves_possible(sim)
     level = os.environ.get("TEST_LEVEL") or (ICARUS_LEVEL if sim == "icarus" else "default")
@@ -155,6 +164,9 @@ MUTANTS = {
     # p = w dx truncated to P_BITS instead of rounded half up
     "moments-p-rounding": ("moments", "moments.sv.j2",
                            "{{ wdx_w }}'sd{{ 2 ** (k - 1) }};", "{{ wdx_w }}'sd0;"),
+    # uav on xc7: a quaternion component's square with its top bits' part one place too high
+    "moments-quaternion-square": ("moments", "moments.sv.j2",
+                                  "W + hb, 2 * W) }} <<< 17)", "W + hb, 2 * W) }} <<< 18)"),
     # a step counted as beyond reach whatever its shifts
     "moments-reach": ("moments", "moments.sv.j2", "|| sh5_q != '0;", "|| 1'b0;"),
     # absolute weights 2^-t: the running minimum not subtracted
@@ -206,7 +218,8 @@ MUTANTS = {
 
 # mutants that only a config other than the module's first application's catches: the
 # 18 x 18 parts are the ecp5 shape (odd), bot's is xc7's
-MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-pivot-sub": "odd"}
+MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-pivot-sub": "odd",
+                                 "moments-quaternion-square": "uav"}
 
 
 def mutated_templates(tmp_path: Path, mutant: str, template: str, old: str, new: str) -> Path:
