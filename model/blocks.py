@@ -273,9 +273,8 @@ def weight_uav(dp: Datapath, x: np.ndarray, v_gps: np.ndarray, lanes: int = 1,
 @dataclass(frozen=True)
 class Sums:
     """What the moments block accumulates at line rate, per run (object arrays of exact
-    integers, leading axis R): every sum rescaled by each beat's shift before the beat is added
-    (round half up: acc <- round(acc 2^-shift) + beat), so all are relative to the step's best
-    particle."""
+    integers, leading axis R): every sum rescaled by the beats' shifts (round half up), so all
+    are relative to the step's best particle (interleaved_sums)."""
 
     w: np.ndarray           # (R,) sum w, weight fraction bits
     s1: np.ndarray          # (R, n) sum w dx_i, fraction weight + x_i
@@ -360,6 +359,33 @@ def rescaled_sums(values: np.ndarray, shift: np.ndarray, scale: np.ndarray) -> n
     return acc
 
 
+def interleaved_sums(values: np.ndarray, shift: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """The moments block's sums: two accumulators take the beats in turn (beat b to b mod 2), a
+    beat of zeros with shift 0 after the step's last, then their total. Each accumulator
+    rescales by every shift since its own last beat, in one rounding: acc <- round(acc
+    2^-(s_b-1 + s_b) scale) + beat b (rescaled_sums on its beats). Each is updated every other
+    beat, so the hardware's rescale and add take a clock each (a loop of two clocks, the two
+    accumulators in flight in it); the zero beat brings the other accumulator to the last
+    beat's scale. A rescale rounds two partial sums instead of one whole (at most half an LSB
+    more a rescale; quality: README, "Quality against float64"). values (R, N, A), shift (R, B),
+    N = B x lanes; returns (R, A) object."""
+    runs, n, cols = values.shape
+    beats = shift.shape[1]
+    lanes = n // beats
+    v = np.concatenate([values.reshape(runs, beats, lanes, cols),
+                        np.zeros((runs, 1, lanes, cols), dtype=values.dtype)], axis=1)
+    s = np.concatenate([shift, np.zeros((runs, 1), dtype=shift.dtype)], axis=1)
+    since = s.copy()
+    since[:, 1:] += s[:, :-1]                    # the shifts since the same accumulator's last
+    total = np.zeros((runs, cols), dtype=object)
+    for first in (0, 1):
+        beats_of = v[:, first::2]
+        if beats_of.shape[1]:
+            total = total + rescaled_sums(beats_of.reshape(runs, -1, cols), since[:, first::2],
+                                          scale)
+    return total
+
+
 def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
                ref: np.ndarray, pairs: list[tuple[int, int]]) -> tuple[Sums, np.ndarray]:
     """One pass per run: dx = x - ref (saturated), W, S1, S2 and sum w^2, rescaled by the
@@ -377,7 +403,7 @@ def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
         np.multiply(p[..., i], dx[..., j], out=values[..., 1 + n + q])
     np.multiply(w, w, out=values[..., -1])
     scale = np.array([1] * (1 + n + len(pairs)) + [2], dtype=np.int64)
-    acc = rescaled_sums(values, shift, scale)
+    acc = interleaved_sums(values, shift, scale)
     in_reach = np.any(shift > 0, axis=1)
     sums = Sums(acc[:, 0], acc[:, 1:1 + n], acc[:, 1 + n:1 + n + len(pairs)], acc[:, -1],
                 in_reach, guard)

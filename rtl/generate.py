@@ -755,8 +755,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     # operands picked, each DSP's own copy of them, the partial products, their middle sum, the
     # product: pair r's from c = t_mean + mm_lat + r
     mm_lat = 6
-    # q - m_i m_j registered a clock after both are final (the quotient at c = QB + 1)
-    t_sig = 1 + max(max(1 + d["qb"], t_mean + mm_lat + r) for r, d in enumerate(sig))
+    # q - m_i m_j registered a clock after both are final (the quotient at c = QB + 2: the
+    # dividend registered at c = 0)
+    t_sig = 1 + max(max(2 + d["qb"], t_mean + mm_lat + r) for r, d in enumerate(sig))
     t_load = max(t_sig, t_ess)
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}
     if dp.app == "uav":
@@ -769,14 +770,16 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         qd = _div_params(word, rb, fq + g, qbound)
         # mu registered, the squares' partial products, the squares, their sum
         t_sqrt = t_mean + 4
-        t_qdiv = t_sqrt + 1 + rb + 1                  # the dividends' norm terms registered
+        dg = rb + rb % 2                              # root bits, two a clock (radix 4)
+        t_qdiv = t_sqrt + 1 + dg // 2 + 1             # the dividends' norm terms registered
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])
         # xc7: mu_i on the DSP48E1's wide port, one product a square (its top bits a shifted add)
         sq_wide = DSP_WIDTH < word <= DSP_WIDE_OPERAND[cfg.family]
-        ctx.update(n2_w=n2_w, y_pad=2 * rb - y_w, root_bits=rb, sq_shift=2 * g + 2, sq_wide=sq_wide,
+        ctx.update(n2_w=n2_w, root_bits=rb, dg=dg, sq_shift=2 * g + 2, sq_wide=sq_wide,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    # input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame, acc, out
-    acc_stages = 9
+    # the flush, input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame beside
+    # the loop's shift, the loop's add, the two accumulators read out (registered), their sum
+    acc_stages = 12
     # p dx_j as DSP-sized partial products (one multiplier each, both operands within its
     # signed ports), summed with the lanes: p whole on the wide port (xc7: P_BITS fits the
     # DSP48E1's 25) or in unsigned pieces and a signed top (ECP5: 17 + 8 bits), dx whole or,

@@ -343,7 +343,7 @@ def moments_view(cfg: Config, sim: str) -> list[Group]:
     if k["uav"]:
         inner += [Trace(f"{top}.norm2_q", k["n2_w"] - 1, 0, label="|q|^2",
                         frac_bits=2 * dp.x[0].frac_bits),
-                  Trace(f"{top}.root_q", k["root_bits"] - 1, 0, label="isqrt", frac_bits=0)]
+                  Trace(f"{top}.root_q", k["dg"] - 1, 0, label="isqrt", frac_bits=0)]
     return [
         Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
         _stream(top, "input x, w", "s_axis", k["lane_w"], cfg.lanes,

@@ -158,6 +158,29 @@ def test_rescaled_sums_are_the_sequential_recurrence() -> None:
             assert list(got[r]) == acc
 
 
+def test_interleaved_sums_are_two_sequential_recurrences() -> None:
+    """Beat b to accumulator b mod 2, a zero beat after the last, each accumulator rescaled by
+    the shifts since its own last beat in one rounding, then their total: as a loop over beats
+    in Python ints (any number of beats, odd and even, any lanes)."""
+    rng = np.random.default_rng(3)
+    scale = np.array([1, 2, 1])
+    for lanes in (1, 2, 3):
+        for beats in (1, 2, 3, 30):
+            values = rng.integers(-(1 << 61), 1 << 61, size=(4, beats * lanes, 3))
+            shift = np.where(rng.random((4, beats)) < 0.3, rng.integers(0, 128, (4, beats)), 0)
+            got = blocks.interleaved_sums(values, shift, scale)
+            for r in range(4):
+                acc = [[0, 0, 0], [0, 0, 0]]
+                sums = [values[r, b * lanes:(b + 1) * lanes].astype(object).sum(axis=0)
+                        for b in range(beats)] + [np.zeros(3, dtype=object)]
+                sh = [int(v) for v in shift[r]] + [0]
+                for b in range(beats + 1):
+                    for c in range(3):
+                        s_ = (sh[b - 1] + sh[b]) * int(scale[c]) if b >= 2 else 0
+                        acc[b % 2][c] = ((acc[b % 2][c] + ((1 << s_) >> 1)) >> s_) + int(sums[b][c])
+                assert list(got[r]) == [acc[0][c] + acc[1][c] for c in range(3)]
+
+
 def test_moments_against_numpy() -> None:
     """Weights relative to the best (with rescales): mean and covariance as numpy's weighted
     ones of 2^-(t - min t), the ESS as Kish's."""
