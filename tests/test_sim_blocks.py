@@ -153,7 +153,8 @@ MUTANTS = {
                               "\"$signed({ref%d_q, 1'b1})\"", "\"$signed({ref%d_q, 1'b0})\""),
     # the rescale of the sums drops its rounding half when the new frame is not 0
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
-                                 "{{ name }}_rb3p_q <= !{{ name }}_fd", "{{ name }}_rb3p_q <= 1'b0"),
+                                 "{{ name }}_rb3p_q <= !{{ name }}_fd",
+                                 "{{ name }}_rb3p_q <= 1'b0"),
     # an accumulator rescaled by its own beat's shift only, not the other's since its last beat
     "moments-shift-since": ("moments", "moments.sv.j2",
                             "{{ tw }}'({{ sp }}) + ", ""),
@@ -168,10 +169,12 @@ MUTANTS = {
                               "({p, 1'b1} + {dx, sub})", "({p, 1'b1} + {dx, 1'b0})"),
     # uav's quaternion norm: the root's digit 3 takes 3R + 1 for 3R' = 3 (4R + 3) = 12R + 9
     "moments-root-digit": ("moments", "moments.sv.j2",
-                           "r3_q <= (r3i1 << 2) | {{ dg }}'d1;", "r3_q <= (r3i_q << 2) | {{ dg }}'d1;"),
+                           "r3_q <= (r3i1 << 2) | {{ dg }}'d1;",
+                           "r3_q <= (r3i_q << 2) | {{ dg }}'d1;"),
     # the read-out takes the frame of the accumulator in b_q from a clock before
     "moments-readout-frame": ("moments", "moments.sv.j2",
-                              "{{ name }}_e6_q : {{ name }}_eo_q;", "{{ name }}_e6_q : {{ name }}_ef_q;"),
+                              "{{ name }}_e6_q : {{ name }}_eo_q;",
+                              "{{ name }}_e6_q : {{ name }}_ef_q;"),
     # a frame shift's carry (the bit under the new frame) never added
     "moments-frame-carry": ("moments", "moments.sv.j2",
                             "&& {{ name }}_xe[{{ j * F + F - 1 }}])", "&& 1'b0)"),
