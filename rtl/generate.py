@@ -727,7 +727,7 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         s = dp.chol[i].frac_bits - dp.x[i].frac_bits
         qb = _sbits((1 << (word + s)) + 2)
         mean.append({"num_w": s1_w, "den_w": ws_w, "shift": s, "qb": qb, "dw": ws_w,
-                     "nnw": ws_w + qb})
+                     "nnw": ws_w + qb})               # a signed divider: QB - 1 bits and the sign
     sig = []
     for i, j in pairs:
         s = (dp.weight.frac_bits + dp.cov_frac(i, j) - dp.x[i].frac_bits - dp.x[j].frac_bits
@@ -735,9 +735,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         err = nmax << (word - 2) if k else 0
         bound = (((1 << (2 * word - 2 - k)) + err) << s) + 1 if k else (
             (1 << (2 * word - 2 + s)) + 1)
-        d = _div_params(s2_w, ws_w, s, bound)
-        if d["qb"] < ws_w:                            # den + 2^QB den side by side, no add
-            raise ValueError("moments: a Sigma quotient narrower than W (not generated)")
+        # floor(S2 2^(s+1) / W), a signed divider (QB bits and the sign), then rounded: (q + 1) >> 1
+        d = {"num_w": s2_w, "den_w": ws_w, "shift": s, "qb": _sbits(bound), "dw": ws_w,
+             "nnw": ws_w + _sbits(bound) + 1}
         mm_w = mean[i]["qb"] + mean[j]["qb"]
         d.update(i=i, j=j, mm_w=mm_w, v_w=max(d["qb"], mm_w) + 1,
                  out_w=dp.sigma(i, j).width, fmt=str(dp.sigma(i, j)))
@@ -750,13 +750,13 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     ess["nnw"] = ess["dw"] + ess["qb"]
     t_ess_div = sq_steps + 2                          # W^2 done, then its dividend registered
     t_ess = t_ess_div + 1 + ess["qb"]
-    t_mean = 1 + max(d["qb"] for d in mean)           # quotients readable (finalise clocks)
+    t_mean = max(d["qb"] for d in mean)               # quotients readable (finalise clocks)
     # m_i m_j, the pairs in turn through one multiplier: the pair's slot, its selects, its
     # operands picked, each DSP's own copy of them, the partial products, their middle sum, the
     # product: pair r's from c = t_mean + mm_lat + r
     mm_lat = 6
-    # q - m_i m_j registered a clock after both are final (the quotient at c = QB + 2: the
-    # dividend registered at c = 0)
+    # the quotient final at c = QB + 1, rounded a clock later; q - m_i m_j registered a clock
+    # after both are final
     t_sig = 1 + max(max(2 + d["qb"], t_mean + mm_lat + r) for r, d in enumerate(sig))
     t_load = max(t_sig, t_ess)
     ctx: dict[str, Any] = {"uav": dp.app == "uav"}

@@ -164,6 +164,9 @@ MUTANTS = {
     # a beat arriving on the wrong parity enters the loop at once (the other accumulator's slot)
     "moments-parity": ("moments", "moments.sv.j2",
                        "assign aligned = open_q || par_q == need_q;", "assign aligned = 1'b1;"),
+    # Sigma's quotient floored instead of rounded half up (its half bit dropped)
+    "moments-sigma-rounding": ("moments", "moments.sv.j2",
+                               "{{ d.qb }}'(sig{{ q }}_quo[0])", "{{ d.qb }}'(1'b0)"),
     # the dividers' subtraction a unit short (no carry into p + ~d)
     "moments-divider-carry": ("moments", "moments_div.sv.j2",
                               "({p, 1'b1} + {dx, sub})", "({p, 1'b1} + {dx, 1'b0})"),
