@@ -1102,7 +1102,7 @@ MODULES: dict[str, Module] = {
     "recip": Module("recip", ("recip_lane", "recip"), recip_context),
     # the whole filters: their own GRNG (draws x LANES lanes), a FIFO, the controller, the top
     **{f"gpf_{app}": Module(
-        f"gpf_{app}", ("gpf_grng", "gpf_fifo", "ctrl", f"gpf_{app}"), filter_context,
+        f"gpf_{app}", ("gpf_grng", "gpf_fifo", "gpf_slice", "ctrl", f"gpf_{app}"), filter_context,
         uses=("grng",), apps=(app,), blocks=("sample_cond", f"propagate_{app}", f"weight_{app}",
                              "moments", "cholesky", "sigma_predict"),
         templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf")

@@ -191,8 +191,8 @@ def test_fault_flagged_and_survived(fault: str) -> None:
         assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
 
 
-# (module, template, text, replacement, scenario, config overrides): blocks' mutants the whole
-# filter must catch as well, and the controller's own
+# (module, template, text, replacement, scenario, config overrides[, testcase]): blocks'
+# mutants the whole filter must catch as well, and the controller's and the top's own
 FILTER_MUTANTS = {
     "moments-reference": (*MUTANTS["moments-reference"], None, {}),
     "moments-mean-rounding": (*MUTANTS["moments-mean-rounding"], None, {}),
@@ -207,18 +207,22 @@ FILTER_MUTANTS = {
                             "low_ess ? sigma_q :", None, {"filter.ess_min": 1}),
     "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "            sticky_q <= sticky_q | flags_q;",
                     "            sticky_q <= flags_q;", "bot_outlier", {}),
+    # a register slice between blocks loses the beat it holds in its skid under backpressure
+    "slice-skid": ("gpf_slice", "gpf_slice.sv.j2", "m_data <= skid_q ? skid_data_q : s_data;",
+                   "m_data <= s_data;", None, {}, "test_stalls"),
 }
 
 
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
 @pytest.mark.parametrize("mutant", list(FILTER_MUTANTS))
 def test_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
-    module, template, old, new, scenario, overrides = FILTER_MUTANTS[mutant]
+    module, template, old, new, scenario, overrides, *testcase = FILTER_MUTANTS[mutant]
     templates = mutated_templates(tmp_path, mutant, template, old, new)
     spec = {"steps": 5, "particles": 32, "scenario": scenario} if scenario else {}
     result = run_sim(load_config("configs/bot.toml", overrides), "gpf_bot", "icarus", seed=1,
-                     testcase="test_filter", template_dir=templates,
-                     build_root=tmp_path / "build", log_file=tmp_path / "sim.log",
+                     testcase=testcase[0] if testcase else "test_filter",
+                     template_dir=templates, build_root=tmp_path / "build",
+                     log_file=tmp_path / "sim.log",
                      extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
     assert result.tests == 1
     assert result.failed == 1, f"mutant {mutant} of {module} survived the whole filter"
