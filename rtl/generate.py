@@ -802,6 +802,10 @@ def moments_context(cfg: Config) -> dict[str, Any]:
     w_top_apart = cfg.family == "xc7" and ww == DSP_WIDTH
     w_top = {"ww": w_top_apart,
              "wdx": w_top_apart and DSP_WIDTH < word <= DSP_WIDE_OPERAND["xc7"]}
+    # neither operand of w dx on one multiplier (the ECP5's 18 x 18 with 19- and 20-bit ones): its
+    # parts, summed a stage later with p's rounding half below the shifted part's zero bits
+    w_top["split"] = (not w_top["wdx"] and ww == DSP_WIDTH
+                      and word > DSP_WIDE_OPERAND[cfg.family] and 0 < k < ww)
     prod_plan = {"pieces": pieces, "b_split": b_split, "bl": bl,
                  "hb": word - bl if b_split else 0, "hw": p_w + word - bl if b_split else 0}
     ctx.update({

@@ -174,6 +174,9 @@ MUTANTS = {
     "moments-root-digit": ("moments", "moments.sv.j2",
                            "r3_q <= (r3i1 << 2) | {{ dg }}'d1;",
                            "r3_q <= (r3i_q << 2) | {{ dg }}'d1;"),
+    # ecp5 with 20-bit words: w dx's shifted part (w_lo dx_hi + t dx) one place too high
+    "moments-wdx-split": ("moments", "moments.sv.j2",
+                          "W + 2, wdx_w) }} <<< {{ lo }});", "W + 2, wdx_w) }} <<< {{ lo + 1 }});"),
     # the read-out takes the frame of the accumulator in b_q from a clock before
     "moments-readout-frame": ("moments", "moments.sv.j2",
                               "{{ name }}_e6_q : {{ name }}_eo_q;",
@@ -243,7 +246,8 @@ MUTANTS = {
 # mutants that only a config other than the module's first application's catches: the
 # 18 x 18 parts are the ecp5 shape (odd), bot's is xc7's
 MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-pivot-sub": "odd",
-                                 "moments-quaternion-square": "uav", "moments-root-digit": "uav"}
+                                 "moments-quaternion-square": "uav", "moments-root-digit": "uav",
+                                 "moments-wdx-split": "odd"}
 
 
 def mutated_templates(tmp_path: Path, mutant: str, template: str, old: str, new: str) -> Path:
