@@ -768,8 +768,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         rb = (y_w + 1) // 2                           # root bits, one a clock
         qbound = -(-(1 << (fq + g + 1)) // ((1 << (g + 1)) - 1)) + 1  # 2^fq / (1 - 2^-(g+1))
         qd = _div_params(word, rb, fq + g, qbound)
-        # mu registered, the squares' partial products, the squares, their sum
-        t_sqrt = t_mean + 4
+        # mu registered, its copies beside the squares' multipliers, the partial products, the
+        # squares, their sum
+        t_sqrt = t_mean + 5
         dg = rb + rb % 2                              # root bits, two a clock (radix 4)
         t_qdiv = t_sqrt + 1 + dg // 2 + 1             # the dividends' norm terms registered
         t_load = max(t_load, t_qdiv + 1 + qd["qb"])

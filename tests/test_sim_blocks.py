@@ -174,9 +174,10 @@ MUTANTS = {
     "moments-root-digit": ("moments", "moments.sv.j2",
                            "r3_q <= (r3i1 << 2) | {{ dg }}'d1;",
                            "r3_q <= (r3i_q << 2) | {{ dg }}'d1;"),
-    # ecp5 with 20-bit words: w dx's shifted part (w_lo dx_hi + t dx) one place too high
+    # ecp5 with 20-bit words: w dx's part w_lo dx_hi one place too high in the exact w dx
     "moments-wdx-split": ("moments", "moments.sv.j2",
-                          "W + 2, wdx_w) }} <<< {{ lo }});", "W + 2, wdx_w) }} <<< {{ lo + 1 }});"),
+                          "(sext('wh3_%d_%d_q' % (l, i), W + 1, wdx_w), lo),",
+                          "(sext('wh3_%d_%d_q' % (l, i), W + 1, wdx_w), lo + 1),"),
     # the read-out takes the frame of the accumulator in b_q from a clock before
     "moments-readout-frame": ("moments", "moments.sv.j2",
                               "{{ name }}_e6_q : {{ name }}_eo_q;",
