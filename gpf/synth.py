@@ -141,6 +141,12 @@ def _name(module_key: str) -> str:
     return module_key.lstrip("\\")
 
 
+def block_name(cell: str) -> str:
+    """A module's name from Yosys's name of a parameterised variant: `$paramod$<hash>\\name`
+    or `$paramod\\name\\PARAM=value...`."""
+    return cell.split("\\")[1] if cell.startswith("$paramod") else cell
+
+
 def _own_counts(stat: dict) -> dict[str, dict[str, int]]:
     return {_name(k): v["num_cells_by_type"] for k, v in stat["modules"].items()}
 
@@ -174,8 +180,8 @@ def area_from_stat(stat: dict, top: str) -> tuple[dict[str, float], dict[str, di
         raise SynthError(f"{top}: cells of unknown type {unknown}: not counted in any column")
     parts: dict[str, dict[str, float]] = {}
     for cell, n in own[top].items():
-        if cell in own:     # a block; its parameterised variants ($paramod$...\name) as one
-            part = parts.setdefault(cell.rsplit("\\", 1)[-1], {})
+        if cell in own:     # a block; its parameterised variants as one
+            part = parts.setdefault(block_name(cell), {})
             for c, m in flat_cells(cell, own).items():
                 part[c] = part.get(c, 0) + m * n
     blocks = {name: _columns(cells) for name, cells in sorted(parts.items())}

@@ -47,6 +47,19 @@ def test_area_multiplies_instances_down_the_hierarchy() -> None:
         assert sum(b[col] for b in blocks.values()) == total[col], col
 
 
+def test_parameterised_variants_count_as_their_module() -> None:
+    """Yosys names a module with parameters `$paramod\\name\\P=value` (or `$paramod$hash\\name`):
+    each such block is reported under its module's name, its variants added up."""
+    stat = _stat({"top": {"$paramod\\slice\\WIDTH=s32'01": 1, "$paramod\\slice\\WIDTH=s32'10": 2,
+                          "$paramod$1a2b\\div": 1},
+                  "$paramod\\slice\\WIDTH=s32'01": {"FDRE": 1},
+                  "$paramod\\slice\\WIDTH=s32'10": {"FDRE": 2, "LUT3": 1},
+                  "$paramod$1a2b\\div": {"CARRY4": 1}})
+    _, blocks = area_from_stat(stat, "top")
+    assert set(blocks) == {"slice", "div", "(top)"}
+    assert blocks["slice"]["FF"] == 1 + 2 * 2 and blocks["slice"]["LUT"] == 2
+
+
 def test_a_cell_type_no_column_counts_is_refused() -> None:
     with pytest.raises(SynthError, match="unknown type"):
         area_from_stat(_stat({"top": {"LUT6": 1, "URAM288": 1}}), "top")
