@@ -13,10 +13,11 @@ flip-flops into the DSP. This pass does the same on synth_ecp5's JSON netlist be
   register, and those flip-flops go.
 
 Only flip-flops on one rising clock with one enable and one reset per port are moved, and only
-where the DSP's register behaves exactly as they did: no set, a reset only synchronous, to 0
-and on a flip-flop without an enable (no question of reset against enable), and no operand bit
-tied to 1 beside a reset (the DSP's register would clear it). Timing flow only; the generic
-RTL, its simulation and the xc7 synthesis never see this.
+where the DSP's register behaves exactly as they did: no set, a reset only synchronous and to 0
+(over the enable, as the fabric's LSR_OVER_CE flip-flop and the DSP's RESETMODE "SYNC" register
+both take it: a datapath register that stalls and resets moves), and no operand bit tied to 1
+beside a reset (the DSP's register would clear it). Timing flow only; the generic RTL, its
+simulation and the xc7 synthesis never see this.
 """
 
 from __future__ import annotations
@@ -45,13 +46,15 @@ def _param(cell: dict, name: str, default: str = "") -> str:
 
 def _plain_flop(cell: dict) -> bool:
     """A flip-flop a DSP register can stand in for: rising clock, no set, and a reset (if
-    any) synchronous, to 0 and without an enable beside it."""
+    any) synchronous, to 0 and over the enable."""
     if cell["type"] != "TRELLIS_FF" or _param(cell, "CLKMUX", "CLK") != "CLK":
         return False
     enable = _param(cell, "CEMUX", "1")
+    if enable not in ("1", "CE"):
+        return False
     if cell["connections"].get("LSR", ["0"]) == ["0"]:
-        return enable in ("1", "CE")
-    return (enable == "1" and _param(cell, "LSRMUX", "LSR") == "LSR"
+        return True
+    return (_param(cell, "LSRMUX", "LSR") == "LSR"
             and _param(cell, "REGSET", "RESET") == "RESET"
             and _param(cell, "SRMODE", "LSR_OVER_CE") == "LSR_OVER_CE")
 

@@ -53,18 +53,19 @@ module dsp_cases (
   // wider than the DSP: split by synthesis, operands registered in each part
   reg signed [23:0] a6, b6;
   always @(posedge clk) begin a6 <= rw; b6 <= {ra, rb[5:0]}; wide <= a6 * b6; end
-  // a reset beside an enable stays in the fabric
+  // a reset over an enable (a stalling datapath register): operand and product move
   reg signed [17:0] a7;
   always @(posedge clk) if (rst) a7 <= 0; else if (en) a7 <= ra;
-  always @(posedge clk) held <= a7 * b1;
+  always @(posedge clk) if (rst) held <= 0; else if (en) held <= a7 * b1;
   // an operand bit tied to 1 beside a reset stays in the fabric (the DSP would clear it)
   reg [15:0] a8;
   always @(posedge clk) a8 <= rst ? 16'd0 : ra[15:0];
   always @(posedge clk) ones <= $signed({2'b01, a8}) * b1;
-  // operand bits under different enables stay in the fabric
-  reg [17:0] a9;
+  // operand bits under different enables stay in the fabric, and so does a set
+  reg [17:0] a9, a10;
   always @(posedge clk) begin a9[17:9] <= ra[17:9]; if (en) a9[8:0] <= ra[8:0]; end
-  always @(posedge clk) mixed <= $signed(a9) * b1;
+  always @(posedge clk) if (rst) a10 <= 18'h3ffff; else if (en) a10 <= rb;
+  always @(posedge clk) mixed <= $signed(a9) * $signed(a10);
 endmodule
 """
 
@@ -138,8 +139,8 @@ def test_packed_registers_keep_every_product(tmp_path: Path) -> None:
     stats, out = _packed_against_rtl(tmp_path, pack_dsp_registers)
     assert "DONE mismatches=0" in out, out
     # products moved: plain, gated, reset, chained, held, ones, mixed (not summed, nor wide's
-    # parts, which meet adders); operands refused: a7 (reset and enable), a8 (a 1 beside a
-    # reset), a9 (two enables), plain's product as chained's
+    # parts, which meet adders); operands refused: a8 (a 1 beside a reset), a9 (two enables),
+    # a10 (a set), plain's product as chained's; a7 (a reset over an enable) moved
     assert stats.outputs == 7, stats
     for reason in ("unsupported reset", "tied to 1", "enables", "P: a product bit read",
                    "logic before"):
