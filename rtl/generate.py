@@ -994,7 +994,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
                       "cw": max(clocks).bit_length(), "jw": max(1, (size - 1).bit_length()),
                       "tw": max(size + 1, size * size - 1).bit_length()})
     kinds = list({c["n"]: c for c in cores}.values())
-    latency = max(c["latency"] for c in cores)
+    latency = max(c["latency"] for c in cores) + 1     # + the input register
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
     offs = [sum(sigma_w[:t]) for t in range(len(pairs))]
     core_of = {i: c for c in cores for i in range(c["start"], c["start"] + c["n"])}
@@ -1055,7 +1055,8 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         t["init"] = f"{entry_half[t['dest']] if t['first'] else 0:X}"
     has_mul = any(t["kind"] == "mul" for t in terms)
     offs = [sum(sigma_w[:q]) for q in range(len(pairs))]
-    entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j)}
+    entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j),
+                "top": top - dp.cov_frac(i, j) + w - 1}     # the entry's sign bit in the sum
                for (i, j), o, w in zip(pairs, offs, sigma_w, strict=True)]
     inputs = [{"off": o, "w": w} for o, w in zip(offs, sigma_w, strict=True)]
     return {
@@ -1065,8 +1066,8 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         "kw": max(1, (len(terms) - 1).bit_length()),
         "dest_w": max(1, (len(pairs) - 1).bit_length()),
         # the beat, every term through the program's register (and the multiplier's) and the
-        # sum, the last rounding, the output register
-        "latency": len(terms) + 3 + has_mul, "interval": len(terms) + 4 + has_mul,
+        # sum, the last sum's range flags, its rounding, the output register
+        "latency": len(terms) + 4 + has_mul, "interval": len(terms) + 5 + has_mul,
         "covariance": cfg.covariance,
     }
 

@@ -206,8 +206,8 @@ MUTANTS = {
                             "assign r_prev = mfirst_q ? TOP : r_q;", "assign r_prev = r_q;"),
     # an entry's overflow never detected: it wraps (the corners saturate)
     "sigma_predict-saturation": ("sigma_predict", "sigma_predict.sv.j2",
-                                 "assign o{{ loop.index0 }} = !(",
-                                 "assign o{{ loop.index0 }} = 1'b0 && !("),
+                                 "assign o{{ loop.index0 }} = !c_fits_q",
+                                 "assign o{{ loop.index0 }} = 1'b0 && !c_fits_q"),
     "sigma_predict-first-term": ("sigma_predict", "sigma_predict.sv.j2",
                                  "({{ pre }}first_q ? {{ pre }}init_q : acc_q)", "(acc_q)"),
     # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
