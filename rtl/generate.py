@@ -1018,6 +1018,9 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+SIGMA_PREDICT_GROUP_BITS = 2   # the term program's first multiplexer: 4 terms, then the group
+
+
 def sigma_predict_context(cfg: Config) -> dict[str, Any]:
     """The predicted covariance F Sigma F^T + Q (model: blocks.predicted_sigma) as a program of
     terms (blocks.prediction_terms), one a clock: every term's exact value brought to the largest
@@ -1054,6 +1057,8 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         # the rounding's half LSB starts the entry's sum
         t["init"] = f"{entry_half[t['dest']] if t['first'] else 0:X}"
     has_mul = any(t["kind"] == "mul" for t in terms)
+    # the counter wide enough for its group bits and for one group above them
+    kw = max(SIGMA_PREDICT_GROUP_BITS + 1, (len(terms) - 1).bit_length())
     offs = [sum(sigma_w[:q]) for q in range(len(pairs))]
     entries = [{"off": o, "w": w, "rsh": top - dp.cov_frac(i, j),
                 "top": top - dp.cov_frac(i, j) + w - 1}     # the entry's sign bit in the sum
@@ -1063,11 +1068,12 @@ def sigma_predict_context(cfg: Config) -> dict[str, Any]:
         "lanes": cfg.lanes, "npairs": len(pairs), "in_width": sum(sigma_w),
         "out_width": sum(sigma_w) + 3, "sw": sw, "cw": CONST_WIDTH, "acc_w": acc_w,
         "top": top, "terms": terms, "entries": entries, "inputs": inputs, "has_mul": has_mul,
-        "kw": max(1, (len(terms) - 1).bit_length()),
+        "kw": kw, "gb": SIGMA_PREDICT_GROUP_BITS,
+        "groups": math.ceil(len(terms) / 2**SIGMA_PREDICT_GROUP_BITS),
         "dest_w": max(1, (len(pairs) - 1).bit_length()),
-        # the beat, every term through the program's register (and the multiplier's) and the
-        # sum, the last sum's range flags, its rounding, the output register
-        "latency": len(terms) + 4 + has_mul, "interval": len(terms) + 5 + has_mul,
+        # the beat, every term through the program's two registers (and the multiplier's) and
+        # the sum, the last sum's range flags, its rounding, the output register
+        "latency": len(terms) + 5 + has_mul, "interval": len(terms) + 6 + has_mul,
         "covariance": cfg.covariance,
     }
 
