@@ -8,7 +8,8 @@ flip-flops into the DSP. This pass does the same on synth_ecp5's JSON netlist be
 
 - an operand (A or B) whose every non-constant bit is a flip-flop's output, itself fed by a
   flip-flop, becomes the DSP's input register, fed from those flip-flops' inputs (the
-  flip-flops stay if anything else reads them);
+  flip-flops stay if anything else reads them), when the other operand can too (nextpnr times
+  a MULT18X18D with one input register as if it had none);
 - a product whose every read bit goes to a flip-flop and nowhere else becomes the DSP's output
   register, and those flip-flops go.
 
@@ -111,11 +112,11 @@ def _same(values: list) -> bool:
     return all(v == values[0] for v in values)
 
 
-def _pack_input(net: _Netlist, dsp: dict, side: str, clock: list | None, sources: set[str],
-                stats: Packed) -> list | None:
-    """Give operand `side` its register (on `clock`, if the DSP has one already); returns the
-    register's (clock, enable) or None, and adds the flip-flops it stands in for to
-    `sources`."""
+def _input_register(net: _Netlist, dsp: dict, side: str, clock: list | None, stats: Packed
+                    ) -> tuple[list, list[tuple[str, list, str]]] | None:
+    """Whether operand `side` can take its register (on `clock`, if the DSP has one already):
+    the register's (clock, enable, reset) and, per pin, the flip-flop input it would then read
+    and the flip-flop it stands in for; None (the reason counted) if it cannot."""
     pins = [f"{side}{i}" for i in range(WIDTH)]
     bits = [dsp["connections"][p][0] for p in pins]
     live = [b for b in bits if isinstance(b, int)]
@@ -135,12 +136,12 @@ def _pack_input(net: _Netlist, dsp: dict, side: str, clock: list | None, sources
     if _clears_a_one(controls[0], bits):
         stats.refuse(f"{side}: an operand bit tied to 1 beside a reset")
         return None
+    moves = []
     for pin, bit in zip(pins, bits, strict=True):
         if isinstance(bit, int):
             name = net.driver[bit][0]
-            dsp["connections"][pin] = net.cells[name]["connections"]["DI"]
-            sources.add(name)
-    return controls[0]
+            moves.append((pin, net.cells[name]["connections"]["DI"], name))
+    return controls[0], moves
 
 
 def _pack_output(net: _Netlist, dsp: dict, stats: Packed) -> tuple[list | None, list[str]]:
@@ -193,11 +194,19 @@ def pack_dsp_registers(netlist: dict) -> Packed:
         net = _Netlist(module)
         sources: set[str] = set()
         for dsp in dsps:
-            for side in ("A", "B"):
-                clock = used[id(dsp)][0][1][0] if used[id(dsp)] else None
-                reg = _pack_input(net, dsp, side, clock, sources, stats)
-                if reg is not None:
-                    used[id(dsp)].append((f"INPUT{side}", reg))
+            # both operands or neither: nextpnr times a MULT18X18D with one input register as
+            # if it had none, so a single moved register would only lose its stage
+            clock = used[id(dsp)][0][1][0] if used[id(dsp)] else None
+            plans = [_input_register(net, dsp, side, clock, stats) for side in ("A", "B")]
+            if all(plans) and plans[0][0][0] == plans[1][0][0]:
+                for side, (control, moves) in zip(("A", "B"), plans, strict=True):
+                    for pin, source, flop in moves:
+                        dsp["connections"][pin] = source
+                        sources.add(flop)
+                    used[id(dsp)].append((f"INPUT{side}", control))
+            elif any(plans):
+                stats.refuse("A, B: one operand could take its register and the other not "
+                             "(both kept in the fabric)")
             if used[id(dsp)]:
                 _configure(dsp, used[id(dsp)])
             stats.inputs += sum(r != "OUTPUT" for r, _ in used[id(dsp)])
