@@ -26,6 +26,9 @@ from gpf.synth import SynthError, read_sources, rtl_files, run_yosys
 from gpf.toolchain import ToolchainError
 
 DEVICE = ("--85k", "--package", "CABGA381")
+# the LFE5U-85F's hard blocks, countable before placement (its LUTs and flip-flops are not:
+# nextpnr packs them into slices)
+DEVICE_CELLS = {"MULT18X18D": 156, "DP16KD": 208}
 TARGET_MHZ = 125.0      # issue #13's bar for bot and uav at LANES 1
 
 
@@ -81,6 +84,25 @@ def late_endpoints(data: dict, period_ns: float, most: int = 5
     return len(arrivals), sum(len(v) for v in groups.values()), worst[:most]
 
 
+def over_capacity(design: dict) -> str | None:
+    """Why the netlist cannot fit the device (its hard blocks counted per top-level instance),
+    or None: said at once, not as nextpnr's placement error after its packing."""
+    counts: dict[str, dict[str, int]] = {kind: {} for kind in DEVICE_CELLS}
+    for module in design["modules"].values():
+        for name, cell in module["cells"].items():
+            if cell["type"] in counts:
+                block = name.split(".")[0]
+                counts[cell["type"]][block] = counts[cell["type"]].get(block, 0) + 1
+    for kind, by_block in counts.items():
+        used = sum(by_block.values())
+        if used > DEVICE_CELLS[kind]:
+            parts = ", ".join(f"{b} {n}" for b, n in sorted(by_block.items(),
+                                                             key=lambda item: -item[1]))
+            return (f"does not fit the LFE5U-85F: {used} {kind} of {DEVICE_CELLS[kind]} "
+                    f"({parts})")
+    return None
+
+
 def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                     target_mhz: float = TARGET_MHZ, timeout: float | None = None,
                     seed: int = 1, dsp_registers: bool = True) -> Timing:
@@ -94,8 +116,11 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
               + f"synth_ecp5 -top {top} -json {netlist.name}\n", folder)
     report.unlink(missing_ok=True)
     placed, packed = netlist, {}
+    design = json.loads(netlist.read_text())
+    too_big = over_capacity(design)
+    if too_big:
+        raise SynthError(f"{module}, config {cfg.name}: {too_big}")
     if dsp_registers:
-        design = json.loads(netlist.read_text())
         packed = pack_dsp_registers(design).__dict__
         placed = folder / "packed.json"
         placed.write_text(json.dumps(design))

@@ -149,6 +149,20 @@ def test_late_endpoints_grouped_by_register() -> None:
         4, 3, [("u.acc_q[#]", 2, 9.5), ("u.hh_q[#]", 1, 8.1)])
 
 
+def test_a_design_over_the_device_is_refused_before_placement() -> None:
+    from gpf.timing import DEVICE_CELLS, over_capacity
+
+    def design(dsps: dict[str, int]) -> dict:
+        cells = {f"{block}.p{i}": {"type": "MULT18X18D"} for block, n in dsps.items()
+                 for i in range(n)}
+        return {"modules": {"top": {"cells": cells | {"u_a.q": {"type": "TRELLIS_FF"}}}}}
+
+    limit = DEVICE_CELLS["MULT18X18D"]
+    assert over_capacity(design({"u_a": limit - 10, "u_b": 10})) is None
+    why = over_capacity(design({"u_a": limit - 10, "u_b": 11}))
+    assert why and f"{limit + 1} MULT18X18D of {limit}" in why and f"u_a {limit - 10}, u_b 11" in why
+
+
 @pytest.mark.parametrize("argv, words", [
     (["synth", "--module", "nope"], "unknown"),
     (["synth", "--config", "bot", "--module", "propagate_uav"], "uav"),
