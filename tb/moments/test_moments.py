@@ -281,20 +281,21 @@ async def test_corners(dut: SimHandleBase) -> None:
 
 @cocotb.test()
 async def test_latency_and_throughput(dut: SimHandleBase) -> None:
-    """Without stalls: one step of 500 beats at a beat a clock, its result LATENCY clocks after
-    the last beat."""
+    """Without stalls: one step of 500 beats (fewer if the config's N / LANES is) at a beat a
+    clock, its result LATENCY clocks after the last beat."""
     b = bench()
     cache: dict[str, Steps] = {}
+    beats = min(500, Steps(b).max_beats)
 
     def steps(tag: str) -> Steps:
         if tag not in cache:
             rng = np.random.default_rng(b.rng(tag).getrandbits(32))
             cache[tag] = Steps(b)
-            realistic_step(cache[tag], rng, 500)
+            realistic_step(cache[tag], rng, beats)
         return cache[tag]
 
     await check_latency_and_throughput(
-        dut, block(b), b, lambda n, tag: steps(tag).inputs(), n=500,
+        dut, block(b), b, lambda n, tag: steps(tag).inputs(), n=beats,
         operands=lambda n, tag: steps(tag).ops())
 
 
