@@ -36,7 +36,7 @@ LFSR258 = (
 SEED_FORCE_BIT = (1, 9, 12, 17, 23)
 COMPONENTS = len(LFSR258)
 
-LATENCY = 11  # clocks from a uniform draw to its normal sample at the output register
+LATENCY = 12  # clocks from a uniform draw to its normal sample at the output: 11 stages, the FIFO
 
 
 def splitmix64(x: int) -> tuple[int, int]:

@@ -96,6 +96,9 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "out_fmt": str(cfg.noise),
         "out_w": cfg.noise.width,
         "latency": grng_model.LATENCY,
+        # the output FIFO holds every sample in flight and a clock of the credit loop (DEPTH >=
+        # LATENCY + 1), so the sources run at full rate while the stream takes a sample a clock
+        "fifo_log2": math.ceil(math.log2(grng_model.LATENCY + 1)),
         "components": grng_model.COMPONENTS,
         "seed": cfg.grng.seed,
         "reset_state": [f"{word:016X}" for word in model.reset_state()],
@@ -1092,7 +1095,7 @@ def _twos(value: int, width: int) -> int:
 
 MODULES: dict[str, Module] = {
     # the filter's blocks in stream order, then the primitives they instantiate
-    "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "grng"), grng_context),
+    "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "gpf_fifo", "grng"), grng_context),
     "sample_cond": Module("sample_cond", ("sample_cond_lane", "sample_cond"),
                           sample_cond_context),
     "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
