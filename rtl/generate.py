@@ -96,9 +96,9 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "out_fmt": str(cfg.noise),
         "out_w": cfg.noise.width,
         "latency": grng_model.LATENCY,
-        # the output FIFO holds every sample in flight and a clock of the credit loop (DEPTH >=
-        # LATENCY + 1), so the sources run at full rate while the stream takes a sample a clock
-        "fifo_log2": math.ceil(math.log2(grng_model.LATENCY + 1)),
+        # the output FIFO holds every sample in flight and the credit loop's two clocks (DEPTH >=
+        # LATENCY + 2), so the sources run at full rate while the stream takes a sample a clock
+        "fifo_log2": math.ceil(math.log2(grng_model.LATENCY + 2)),
         "components": grng_model.COMPONENTS,
         "seed": cfg.grng.seed,
         "reset_state": [f"{word:016X}" for word in model.reset_state()],

@@ -543,8 +543,8 @@ def filter_view(cfg: Config, sim: str) -> list[Group]:
         Group("controller", [
             Trace(f"{top}.u_ctrl.state_q", 3, 0, label="state (0 idle .. 3 ready, 4 run, "
                   "5 moments, 6-7 Cholesky, 8 out)", frac_bits=0),
-            Trace(f"{top}.u_ctrl.sent_q", cfg.particles.bit_length() - 1, 0,
-                  label="particles sent", frac_bits=0),
+            Trace(f"{top}.u_ctrl.left_q", cfg.particles.bit_length() - 1, 0,
+                  label="particles left to send", frac_bits=0),
             Trace(f"{top}.u_ctrl.flags_q", 3, 0,
                   label="flags (LOW_ESS, NOT_PD, ZERO_WEIGHTS, SAT)"),
             _bit(f"{top}.u_ctrl.pred_done_q", "predicted Sigma ready"),

@@ -100,7 +100,7 @@ MUTANTS = {
                       "(C2W+XW+1)'(1 <<< (XW-2))"),
     "grng-backpressure": ("grng", "grng.sv.j2", "assign take = m_axis_tvalid && m_axis_tready;",
                           "assign take = m_axis_tvalid;"),
-    "grng-credit": ("grng", "grng.sv.j2", "held_d < (FIFO_LOG2+1)'($unsigned(DEPTH))",
+    "grng-credit": ("grng", "grng.sv.j2", "held_d < (FIFO_LOG2+1)'($unsigned(DEPTH - 1))",
                     "held_d <= (FIFO_LOG2+1)'($unsigned(DEPTH))"),
     "exp-interp-round": ("exp", "exp_lane.sv.j2", "(SW+RB+1)'(1 <<< (RB-1))",
                          "(SW+RB+1)'(1 <<< RB)"),
