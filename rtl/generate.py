@@ -96,9 +96,11 @@ def grng_context(cfg: Config, lanes: int | None = None) -> dict[str, Any]:
         "out_fmt": str(cfg.noise),
         "out_w": cfg.noise.width,
         "latency": grng_model.LATENCY,
-        # the output FIFO holds every sample in flight and the credit loop's two clocks (DEPTH >=
-        # LATENCY + 2), so the sources run at full rate while the stream takes a sample a clock
-        "fifo_log2": math.ceil(math.log2(grng_model.LATENCY + 2)),
+        # the output FIFO: a sample a clock in steady flow needs LATENCY places (start to take)
+        # and the credit's margin of 4; after a stall it holds DEPTH - 2 samples, which must last
+        # while the sources restart (the margin's clocks) and their first sample comes through
+        # (LATENCY): DEPTH >= 2 LATENCY + 8 (32 for a latency of 12)
+        "fifo_log2": math.ceil(math.log2(2 * grng_model.LATENCY + 8)),
         "components": grng_model.COMPONENTS,
         "seed": cfg.grng.seed,
         "reset_state": [f"{word:016X}" for word in model.reset_state()],

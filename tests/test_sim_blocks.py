@@ -100,8 +100,11 @@ MUTANTS = {
                       "(C2W+XW+1)'(1 <<< (XW-2))"),
     "grng-backpressure": ("grng", "grng.sv.j2", "assign take = m_axis_tvalid && m_axis_tready;",
                           "assign take = m_axis_tvalid;"),
-    "grng-credit": ("grng", "grng.sv.j2", "held_d < (FIFO_LOG2+1)'($unsigned(DEPTH - 1))",
-                    "held_d <= (FIFO_LOG2+1)'($unsigned(DEPTH))"),
+    # half the FIFO: steady flow still at full rate, a restart after a stall not
+    "grng-fifo-depth": ("grng", "grng.sv.j2", "localparam int FIFO_LOG2 = {{ fifo_log2 }};",
+                        "localparam int FIFO_LOG2 = {{ fifo_log2 - 1 }};"),
+    "grng-credit": ("grng", "grng.sv.j2", "held_q <= (FIFO_LOG2+1)'($unsigned(DEPTH - 4))",
+                    "held_q <= (FIFO_LOG2+1)'($unsigned(DEPTH - 1))"),
     "exp-interp-round": ("exp", "exp_lane.sv.j2", "(SW+RB+1)'(1 <<< (RB-1))",
                          "(SW+RB+1)'(1 <<< RB)"),
     "exp-underflow": ("exp", "exp_lane.sv.j2", "assign h_d = s > (NW+1)'($unsigned(MW))",

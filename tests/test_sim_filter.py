@@ -203,8 +203,8 @@ FILTER_MUTANTS = {
                             "{1'b1, (PEW-1)'(0), ref_m_data}", None, {}),
     "ctrl-result-reset": ("ctrl", "ctrl.sv.j2", "      est_q <= '0;\n", "", None, {}),  # X
     # the frozen posterior: a low-ESS step keeps the previous Sigma instead of its prediction
-    "ctrl-low-ess-frozen": ("ctrl", "ctrl.sv.j2", "low_ess_q) sigma_new_q <= sigma_pred_q;",
-                            "low_ess_q) sigma_new_q <= sigma_q;", None,
+    "ctrl-low-ess-frozen": ("ctrl", "ctrl.sv.j2", "sigma_new_q <= sigma_pred_q;",
+                            "sigma_new_q <= sigma_q;", None,
                             {"filter.ess_min": 1}),
     "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "            sticky_q <= sticky_q | flags_q;",
                     "            sticky_q <= flags_q;", "bot_outlier", {}),
