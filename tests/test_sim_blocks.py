@@ -236,16 +236,16 @@ MUTANTS = {
     "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
                                "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
-    "cholesky-pivot-sub": ("cholesky", "cholesky_core.sv.j2", "assign lv0[{{ 3 * k + 1 }}] = -(",
-                           "assign lv0[{{ 3 * k + 1 }}] = +("),
+    "cholesky-pivot-sub": ("cholesky", "cholesky_core.sv.j2", "assign lv0[{{ 3 * k + 1 }}] = ~(",
+                           "assign lv0[{{ 3 * k + 1 }}] = ("),
     # the same two on the xc7 shape (a product as a bL + a bH 2^LO): the pivot's a aH a LSB
     # too high, a dot product's a bL added
     "cholesky-pivot-square-xc7": ("cholesky", "cholesky_core.sv.j2",
                                   "2 * w - lo, acc_w) }} <<< LO;",
                                   "2 * w - lo, acc_w) }} <<< (LO + 1);"),
     "cholesky-pivot-sub-xc7": ("cholesky", "cholesky_core.sv.j2",
-                               "assign lv0[{{ 2 * k + 1 }}] = -(",
-                               "assign lv0[{{ 2 * k + 1 }}] = +("),
+                               "assign lv0[{{ 2 * k + 1 }}] = ~(",
+                               "assign lv0[{{ 2 * k + 1 }}] = ("),
 }
 
 
