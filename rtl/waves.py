@@ -542,7 +542,7 @@ def filter_view(cfg: Config, sim: str) -> list[Group]:
         Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
         Group("controller", [
             Trace(f"{top}.u_ctrl.state_q", 3, 0, label="state (0 idle .. 3 ready, 4 run, "
-                  "5 moments, 6-7 Cholesky, 8 out)", frac_bits=0),
+                  "5 moments, 6 ESS, 7 prediction, 8-9 Cholesky, 10 out)", frac_bits=0),
             Trace(f"{top}.u_ctrl.left_q", cfg.particles.bit_length() - 1, 0,
                   label="particles left to send", frac_bits=0),
             Trace(f"{top}.u_ctrl.flags_q", 3, 0,
