@@ -373,12 +373,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         steps = sc.steps if args.steps is None else args.steps
         if steps != sc.steps:
             raise UsageError(f"--steps {steps}: the scenario file has {sc.steps} steps")
+    if args.ip and (args.gate or args.sim != "verilator"):
+        raise UsageError("--ip: the IP block runs on Verilator, as RTL (not with --gate or "
+                         "--sim icarus)")
     # here, not in the simulation's thread: a missing tool is one line, not a traceback
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
     _check_gate_tools(args.gate)
     res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves,
-                                  args.gate))
+                                  args.gate, args.ip))
     if args.plot:
         res["plots"] = plot(res, cfg, Path(args.plot))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -581,6 +584,8 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--plot", metavar="DIR", help="write PNGs of the estimates there")
     p.add_argument("--json", required=True, metavar="OUT")
+    p.add_argument("--ip", action="store_true", help="through gpf_<app>_axi, the filter as an "
+                   "IP block (seed and N over AXI4-Lite, byte-wide streams; Verilator)")
     with_gate(p)
     p.set_defaults(func=cmd_run)
 

@@ -26,13 +26,14 @@ class RunArgs:
     sim: str
     waves: bool
     gate: bool = False      # the synthesized netlist instead of the RTL
+    ip: bool = False        # through gpf_<app>_axi: AXI4-Lite registers, byte-wide streams
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                build_root: Path = Path("build")) -> dict[str, Any]:
     """Run gpf_<app>'s test_filter with these settings; return its results with the run's
     settings, wall time and speed added."""
-    module = f"gpf_{cfg.app}"
+    module = f"gpf_{cfg.app}_axi" if args.ip else f"gpf_{cfg.app}"
     work = sim_build_dir((build_root / cfg.name).resolve(), args.sim, module,
                          "gate" if args.gate else None)
     work.mkdir(parents=True, exist_ok=True)

@@ -143,6 +143,11 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     if cfg.app not in MODULES[module].apps:
         raise ValueError(f"module {module!r} belongs to the {'/'.join(MODULES[module].apps)} "
                          f"filter, not to config {cfg.name!r} (app {cfg.app})")
+    if not MODULES[module].simulated:
+        raise ValueError(f"module {module!r} is an example top for synthesis (gpf synth), "
+                         "with no testbench")
+    if sim == "icarus" and MODULES[module].icarus_gap:
+        raise ValueError(f"module {module!r} runs on Verilator only: {MODULES[module].icarus_gap}")
     check_simulator(sim, waves)
     use_bundled_verilator()
     from cocotb_tools.runner import get_results, get_runner  # after PATH holds Verilator

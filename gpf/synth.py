@@ -197,18 +197,29 @@ def synthesize(cfg: Config, module: str, build_root: Path = Path("build"),
     cfg = for_family(cfg, "xc7")
     folder = (build_root / cfg.name / "synth" / module).resolve()
     files = rtl_files(cfg, module, build_root)
-    area = synth_files(files, MODULES[module].top, folder, timeout)
+    top = MODULES[module].top
+    # a top with constraints (the example top's XDC): every port they name must exist
+    xdc = files[-1].with_suffix(".xdc")
+    ports = constraint_ports(xdc.read_text()) if xdc.exists() else []
+    checks = "".join(f"select -assert-count 1 {top}/x:{port}\n" for port in ports)
+    area = synth_files(files, top, folder, timeout, checks)
     area = dataclasses.replace(area, module=module, config=cfg.name, lanes=cfg.lanes)
     (folder / "area.json").write_text(json.dumps(area.to_json(), indent=1) + "\n")
     return area
 
 
+def constraint_ports(xdc_text: str) -> list[str]:
+    """The ports an XDC names (get_ports NAME or {NAME}), each once."""
+    return list(dict.fromkeys(re.findall(r"get_ports\s+\{?\s*([A-Za-z_]\w*)", xdc_text)))
+
+
 def synth_files(files: list[Path], top: str, folder: Path,
-                timeout: float | None = None) -> Area:
-    """synth_xilinx on Verilog files; raises SynthError on a design problem."""
+                timeout: float | None = None, checks: str = "") -> Area:
+    """synth_xilinx on Verilog files; raises SynthError on a design problem. `checks`: Yosys
+    commands run after elaboration (an assertion failing stops the run)."""
     stat_file = folder / "stat.json"
     script = (read_sources(files, folder)
-              + f"hierarchy -check -top {top}\n"
+              + f"hierarchy -check -top {top}\n" + checks
               + "synth_xilinx -family xc7 -noiopad -noclkbuf\n"
               + "check -assert\n"
               + f"tee -q -o {stat_file.name} stat -json -tech xilinx -top {top}\n")

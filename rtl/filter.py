@@ -15,6 +15,7 @@ from gpf.model.grng import COMPONENTS
 CYCLES_W = 32          # the step's cycle count in the output beat
 FIFO_DEPTH_LOG2 = 4    # process draws waiting beside sample_cond (its latency 8, its slice's 2, 1)
 SLICE_BEATS = 2        # a register slice (gpf_slice) holds up to two beats
+EXAMPLE_CLOCK_MHZ = 125   # the example top's clock constraint: SPEC 9's bar
 STEP_FIELDS = {"bot": ["z", "ox", "oy"],
                "uav": ["omega0", "omega1", "omega2", "accel0", "accel1", "accel2",
                        "v0", "v1", "v2"]}
@@ -82,3 +83,16 @@ def filter_context(cfg: Config) -> dict[str, Any]:
         "latency": None,
         "part_contexts": {"gpf_grng": grng},
     }
+
+
+def axi_context(cfg: Config) -> dict[str, Any]:
+    """gpf_<app>_axi: the core's widths, each stream's in whole bytes, the register block."""
+    from gpf.rtl.regs import ADDR_W, regs_name
+
+    ctx = filter_context(cfg)
+    ctx["cond_w"] = ctx["lanes"] * ctx["cond_lane_w"]
+    widths = {"init": ctx["init_w"], "step": ctx["step_w"], "est": ctx["est_w"],
+              "cond": ctx["cond_w"], "part": ctx["part_w"]}
+    return ctx | {f"{name}_bytes": -(-w // 8) for name, w in widths.items()} | {
+        "regs": regs_name(ctx["app"]), "regs_aw": ADDR_W, "clock_mhz": EXAMPLE_CLOCK_MHZ,
+        "part_contexts": {}}

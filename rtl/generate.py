@@ -34,7 +34,8 @@ from gpf.model.fixed import Format
 from gpf.model.formats import CONST_WIDTH, INV_GUARD, SHIFT_BITS, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip
-from gpf.rtl.filter import filter_context
+from gpf.rtl.filter import axi_context, filter_context
+from gpf.rtl.regs import ICARUS_GAP, register_files
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 DSP_WIDTH = 18         # an ECP5 MULT18X18D operand
@@ -57,6 +58,11 @@ class Module:
     blocks: tuple[str, ...] = ()   # a filter top: the modules it instantiates whole
     templates: tuple[tuple[str, str], ...] = ()   # (part, template) where they differ
     testbench: str | None = None   # its cocotb test module (default gpf.tb.<top>.test_<top>)
+    # files made by code rather than a template: (env, context) -> {file name: text}; the
+    # parts among them (<part>.sv) are not rendered
+    made: Callable[[jinja2.Environment, dict[str, Any]], dict[str, str]] | None = None
+    icarus_gap: str | None = None   # why Icarus cannot run it (None: it can)
+    simulated: bool = True          # False: a top for synthesis only (no testbench)
 
     @property
     def is_filter(self) -> bool:
@@ -1095,6 +1101,13 @@ def _twos(value: int, width: int) -> int:
     return value & ((1 << width) - 1)
 
 
+def example_constraints(env: jinja2.Environment, context: dict[str, Any]) -> dict[str, str]:
+    """The example top's XDC: its clock."""
+    name = f"gpf_{context['app']}_axi_example"
+    return {f"{name}.xdc": env.get_template("gpf_axi_example.xdc.j2").render(module=name,
+                                                                            **context)}
+
+
 MODULES: dict[str, Module] = {
     # the filter's blocks in stream order, then the primitives they instantiate
     "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "gpf_fifo", "grng"), grng_context),
@@ -1123,6 +1136,20 @@ MODULES: dict[str, Module] = {
         uses=("grng",), apps=(app,), blocks=("sample_cond", f"propagate_{app}", f"weight_{app}",
                              "moments", "cholesky", "sigma_predict"),
         templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf")
+       for app in ("bot", "uav")},
+    # the whole filters as IP: the core behind AXI4-Lite registers (PeakRDL) and byte-wide streams
+    **{f"gpf_{app}_axi": Module(
+        f"gpf_{app}_axi", (f"gpf_{app}_regs_pkg", f"gpf_{app}_regs", f"gpf_{app}_axi"),
+        axi_context, uses=(f"gpf_{app}",), apps=(app,), blocks=(f"gpf_{app}",),
+        templates=((f"gpf_{app}_axi", "gpf_axi"),), testbench="gpf.tb.gpf.test_gpf_axi",
+        made=register_files, icarus_gap=ICARUS_GAP)
+       for app in ("bot", "uav")},
+    # an example top for a 7-series part, with its clock constraint: for synthesis only
+    **{f"gpf_{app}_axi_example": Module(
+        f"gpf_{app}_axi_example", (f"gpf_{app}_axi_example",), axi_context,
+        uses=(f"gpf_{app}_axi",), apps=(app,), blocks=(f"gpf_{app}_axi",),
+        templates=((f"gpf_{app}_axi_example", "gpf_axi_example"),), made=example_constraints,
+        icarus_gap=ICARUS_GAP, simulated=False)
        for app in ("bot", "uav")},
 }
 
@@ -1188,7 +1215,11 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     for name in names:
         module = MODULES[name]
         context = module.context(cfg)
+        made = module.made(env, {**context, "config_file": config_file}) if module.made else {}
+        texts |= made
         for part in module.parts:
+            if f"{part}.sv" in made:
+                continue
             # a part may have its own context (the filter's GRNG: more lanes than the block's)
             part_context = context.get("part_contexts", {}).get(part, context)
             texts[f"{part}.sv"] = env.get_template(f"{module.template(part)}.sv.j2").render(

@@ -528,13 +528,14 @@ def _fields(path: str, fields: list, lanes: int = 1, only: set[str] | None = Non
     return out
 
 
-def filter_view(cfg: Config, sim: str) -> list[Group]:
-    """gpf_<app>: the controller, the per-step streams and both debug taps."""
+def filter_view(cfg: Config, sim: str, top: str | None = None) -> list[Group]:
+    """gpf_<app> (or the core at `top`): the controller, the per-step streams and both debug
+    taps."""
     from gpf.model.fixed_gpf import FixedGPF
     from gpf.tb.gpf.filter import streams
 
     s = streams(FixedGPF(cfg))
-    top = scope(sim, f"gpf_{cfg.app}")
+    top = top or scope(sim, f"gpf_{cfg.app}")
     handshake = [_bit(f"{top}.{name}_{sig}") for name in ("s_init", "s_step", "m_est")
                  for sig in ("tvalid", "tready")]
     mu = {f.name for f in s.est if f.name.startswith("mu")}
@@ -574,6 +575,34 @@ VIEWS.update(moments=moments_view)
 VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
 VIEWS.update(cholesky=cholesky_view, sigma_predict=sigma_predict_view)
 VIEWS.update(gpf_bot=filter_view, gpf_uav=filter_view)
+
+
+def ip_view(cfg: Config, sim: str) -> list[Group]:
+    """gpf_<app>_axi: its clock and resets, the AXI4-Lite channels, the control and status it
+    keeps beside the register block, then the core's view."""
+    top = scope(sim, f"gpf_{cfg.app}_axi")
+    channels = [_bit(f"{top}.s_axil_{sig}") for sig in (
+        "awvalid", "awready", "wvalid", "wready", "bvalid", "bready", "arvalid", "arready",
+        "rvalid", "rready")]
+    return [
+        Group("clock and resets", [_bit(f"{top}.aclk"), _bit(f"{top}.aresetn"),
+                                   _bit(f"{top}.rst_q", "the core's reset (with soft reset)")]),
+        Group("AXI4-Lite", channels + [
+            Trace(f"{top}.s_axil_awaddr", 11, 0, label="write address", frac_bits=0),
+            Trace(f"{top}.s_axil_wdata", 31, 0, label="write data"),
+            Trace(f"{top}.s_axil_araddr", 11, 0, label="read address", frac_bits=0),
+            Trace(f"{top}.s_axil_rdata", 31, 0, label="read data")]),
+        Group("control and status", [
+            _bit(f"{top}.run", "CTRL.run"), _bit(f"{top}.taps", "CTRL.taps"),
+            _bit(f"{top}.seed_valid_q", "seed word to the GRNG"),
+            Trace(f"{top}.taken_q", 31, 0, label="steps taken", frac_bits=0),
+            Trace(f"{top}.done_q", 31, 0, label="STEPS (results sent)", frac_bits=0),
+            _bit(f"{top}.irq")]),
+        *filter_view(cfg, sim, f"{top}.u_core")[1:],
+    ]
+
+
+VIEWS.update(gpf_bot_axi=ip_view, gpf_uav_axi=ip_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:

@@ -18,7 +18,7 @@ from typing import Any
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ReadOnly, RisingEdge, SimTimeoutError, with_timeout
+from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, SimTimeoutError, with_timeout
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -29,13 +29,19 @@ from gpf.model.scenarios import Scenario, read_csv
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
+from gpf.tb.gpf.ip import Ip
 from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
-OUTPUTS = ["s_seed_tready", "s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
+OUTPUTS = ["s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
     f"m_{tap}_{sig}" for tap in ("cond", "part") for sig in ("tvalid", "tdata", "tlast")]
+CORE_OUTPUTS = ["s_seed_tready", *OUTPUTS]
+# gpf_<app>_axi's: the streams' (TLAST on m_est too), the AXI4-Lite slave's, the interrupt
+IP_OUTPUTS = [*OUTPUTS, "m_est_tlast", "irq"] + [
+    f"s_axil_{sig}" for sig in ("awready", "wready", "bvalid", "bresp", "arready", "rvalid",
+                                "rdata", "rresp")]
 FLAGS = Format.parse("u4.0")
 SAT = Format.parse("u1.0")
 SHIFT = Field("shift", Format(False, SHIFT_BITS, 0))
@@ -177,6 +183,9 @@ class FilterBench:
         self.s = streams(self.gpf)
         self.corrupt = corrupt
         self.clock_running = clock_running   # another bench of this test started the clock
+        # gpf_<app>_axi: aclk, aresetn, seed and N through registers, TLAST on m_est, padding
+        self.ip = Ip.of(dut, self.gpf.dp.app) if hasattr(dut, "aresetn") else None
+        self.clk = dut.aclk if self.ip else dut.clk
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
                                         expect_mismatch=corrupt)
                        for name, fields in (("cond", self.s.cond),
@@ -185,31 +194,47 @@ class FilterBench:
 
     def idle(self) -> None:
         d = self.dut
-        for name in ("s_seed", "s_init", "s_step"):
+        for name in ("s_init", "s_step") if self.ip else ("s_seed", "s_init", "s_step"):
             getattr(d, f"{name}_tvalid").value = 0
             getattr(d, f"{name}_tdata").value = 0
         for name in ("m_est", "m_cond", "m_part"):
             getattr(d, f"{name}_tready").value = 1
 
     async def send(self, name: str, words: list[int], idle: float = 0.0, tag: str = "") -> None:
-        """Beats on a stream without tlast (seed, init, step inputs)."""
-        drv = StreamDriver(self.dut.clk, self.dut, name, idle, self.b.rng(f"{name}{tag}"),
-                           has_last=False)
-        await drv.send([(word, False) for word in words])
+        """Beats on an input stream (seed, init, step inputs), each a packet. Into
+        gpf_<app>_axi the seed goes through SEED_LO/HI and N through PARTICLES (the init beat's
+        own particle field inverted, to show it is ignored)."""
+        if self.ip and name == "s_seed":
+            await self.ip.load_seed(words)
+            return
+        if self.ip and name == "s_init":
+            field = self.ip.fields["particles.count"]
+            particles = words[0] & ((1 << field.width) - 1)
+            await self.ip.write("particles", particles)
+            words = [w ^ ((1 << field.width) - 1) for w in words]
+        drv = StreamDriver(self.clk, self.dut, name, idle, self.b.rng(f"{name}{tag}"),
+                           has_last=bool(self.ip))
+        await drv.send([(word, True) for word in words])
 
     async def begin(self) -> None:
         """Idle inputs, then the clock (once) and a reset; every output defined after it."""
         self.idle()
-        if self.clock_running:
+        if self.ip:
+            await self.ip.reset()
+        elif self.clock_running:
             await reset(self.dut)
         else:
             await start(self.dut)
             self.clock_running = True
         await ReadOnly()
-        undefined = [port for port in OUTPUTS
+        undefined = [port for port in (IP_OUTPUTS if self.ip else CORE_OUTPUTS)
                      if not getattr(self.dut, port).value.is_resolvable]
         assert not undefined, f"X or Z after reset on {', '.join(undefined)}"
-        await RisingEdge(self.dut.clk)
+        # the GRNG runs from reset: by now its draws wait in the slices after it, which a seed
+        # load must drop (a load right after reset, before any draw, would hide that)
+        await ClockCycles(self.clk, 32)
+        if self.ip:   # steps run, the taps carry every particle
+            await self.ip.write("ctrl", self.ip.value({"ctrl.run": 1, "ctrl.taps": 1}))
 
     async def interrupted_step(self) -> None:
         """Seed, init, and a step reset half-way through its particles (taps stalled now and
@@ -224,11 +249,11 @@ class FilterBench:
         raw = gpf.quantise_inputs(sc.step_inputs(1))
         rng = self.b.rng("interrupt")
         step_in = Source(d, "s_step", 0.0, rng, [(one_beat(self.s.step, step_values(gpf, raw)),
-                                                  False)], has_last=False)
+                                                  True)], has_last=bool(self.ip))
         cond, part = Sink(d, "m_cond", 0.0, rng), Sink(d, "m_part", 0.3, rng)
-        loop = StreamLoop(d.clk, [step_in, cond, part])
+        loop = StreamLoop(self.clk, [step_in, cond, part])
         await cond.wait(gpf.particles // gpf.cfg.lanes // 2)
-        await RisingEdge(d.clk)   # the wait ends in ReadOnly, where nothing may be written
+        await RisingEdge(self.clk)   # the wait ends in ReadOnly, where nothing may be written
         loop.stop()
 
     def init_values(self, mu: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
@@ -263,12 +288,12 @@ class FilterBench:
         raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
         rng = self.b.rng("streams")
-        sinks = {k: Sink(d, f"m_{k}", stall, rng, has_last=(k != "est"))
+        sinks = {k: Sink(d, f"m_{k}", stall, rng, has_last=(k != "est" or bool(self.ip)))
                  for k in ("cond", "part", "est")}
-        steps_in = Source(d, "s_step", stall, rng, [(w, False) for w in step_words],
-                          has_last=False)
+        steps_in = Source(d, "s_step", stall, rng, [(w, True) for w in step_words],
+                          has_last=bool(self.ip))
         # one coroutine drives the step inputs and reads every output
-        loop = StreamLoop(d.clk, [steps_in, *sinks.values()])
+        loop = StreamLoop(self.clk, [steps_in, *sinks.values()])
         mons = {k: sink.beats for k, sink in sinks.items()}
         beats = gpf.particles // lanes
         sticky, rtl_mu = 0, [gpf.to_real_mu(mu)]
@@ -306,8 +331,10 @@ class FilterBench:
                 Path(spec.progress).write_text(f"{k} {self.mismatches}\n")
         await steps_in.done.wait()
         for _ in range(50):   # nothing more may come out
-            await RisingEdge(d.clk)
+            await RisingEdge(self.clk)
         loop.stop()
+        if self.ip:
+            self.check_framing(mons)
         assert len(mons["est"]) == steps, "extra result beats"
         assert len(mons["cond"]) == len(mons["part"]) == steps * beats, \
             "extra tap beats"
@@ -323,6 +350,14 @@ class FilterBench:
         res_out.rmse, res_out.metrics, res_out.lost_track = acc.rmse, acc.metrics, acc.lost
         res_out.quantisation_error, res_out.estimates = acc.quantisation, acc.estimates
         return res_out
+
+    def check_framing(self, mons: dict[str, list]) -> None:
+        """gpf_<app>_axi: every m_est beat a packet (TLAST), every stream's padding zero."""
+        assert all(bt.last for bt in mons["est"]), "m_est: a beat without TLAST"
+        widths = self.b.manifest["modules"][f"gpf_{self.gpf.dp.app}_axi"]["constants"]
+        for k in ("est", "cond", "part"):
+            padded = [bt for bt in mons[k] if bt.data >> widths[f"{k}_w"]]
+            assert not padded, f"m_{k}: padding not zero in beat {padded[0]}"
 
     @property
     def mismatches(self) -> int:
