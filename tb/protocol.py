@@ -1,4 +1,6 @@
-"""A handshake rule checker for one valid/ready channel (AXI4-Stream, each AXI4-Lite channel).
+"""A handshake rule checker for one valid/ready channel of any payload (each AXI4-Lite channel;
+the AXI4-Stream ports have the same rules checked inside their monitors, tb/stream.py, which
+observe every clock anyway).
 
 Once valid is high and ready low at a clock edge, valid must stay high and the payload unchanged
 at the next edge, until the handshake; valid, ready and (while valid) the payload are never X or

@@ -246,6 +246,17 @@ MUTANTS = {
     "cholesky-pivot-sub-xc7": ("cholesky", "cholesky_core.sv.j2",
                                "assign lv0[{{ 2 * k + 1 }}] = ~(",
                                "assign lv0[{{ 2 * k + 1 }}] = ("),
+    # AXI4-Stream protocol (tb/stream.py's checks): tdata or tlast different only while a beat
+    # is offered and not taken, right again at the handshake, so every value checked is right
+    "cholesky-stall-data": ("cholesky", "cholesky.sv.j2", "assign m_axis_tdata = m_data_q;",
+                            "assign m_axis_tdata = m_data_q ^ {{ out_width }}'(m_axis_tvalid "
+                            "&& !m_axis_tready);"),
+    "cholesky-stall-last": ("cholesky", "cholesky.sv.j2", "assign m_axis_tlast = m_last_q;",
+                            "assign m_axis_tlast = m_last_q ^ (m_axis_tvalid "
+                            "&& !m_axis_tready);"),
+    # the GRNG's FIFO shows a sample's LSB flipped until it is popped (StreamMonitor's checks)
+    "grng-stall-data": ("grng", "gpf_fifo.sv.j2", "assign pop_data = mem[rd_q];",
+                        "assign pop_data = mem[rd_q] ^ WIDTH'(!pop);"),
 }
 
 

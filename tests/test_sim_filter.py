@@ -39,16 +39,19 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
                scenario: str | None = None, testcase: str | None = None,
                build_root: Path = Path("build"), stall: float = 0.0,
                overrides: dict | None = None,
-               verilator_opt: str | None = None, gate: bool = False) -> tuple[object, dict]:
+               verilator_opt: str | None = None, gate: bool = False,
+               ip: bool = False) -> tuple[object, dict]:
+    """`ip`: through gpf_<app>_axi, the filter as an IP block (AXI4-Lite, byte-wide streams)."""
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes, **(overrides or {})})
-    module = f"gpf_{cfg.app}"
+    module = f"gpf_{cfg.app}_axi" if ip else f"gpf_{cfg.app}"
     out = (build_root / cfg.name / sim / module / "regression.json").resolve()
     out.unlink(missing_ok=True)
     spec = {"steps": steps, "particles": particles, "seed": seed, "out": str(out),
             "scenario": scenario, "stall": stall}
     # the faults trace too: they share the short run's build, and Verilator rebuilds the
     # whole model (20 s) when --trace comes or goes
-    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10
+    waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10 \
+        and not ip
     result = run_sim(cfg, module, sim, waves=waves, seed=seed, testcase=testcase,
                      extra_env={"GPF_RUN": json.dumps(spec)}, build_root=build_root,
                      log_file=build_root / cfg.name / f"{module}-{sim}.log",
@@ -92,6 +95,27 @@ def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: 
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7,
                              testcase=",".join(tests), verilator_opt=SHORT_OPT)
     check_run(result, res, steps, particles, lanes, tests=len(tests))
+
+
+# gpf_<app>_axi: the same whole-filter tests through the AXI4-Lite registers and the byte-wide
+# streams, and its register tests (tb/gpf/test_gpf_axi.py); Verilator only (Icarus 11 cannot
+# elaborate PeakRDL's structs)
+IP_TESTS = FILTER_TESTS + ("test_register_reset_values", "test_register_access",
+                           "test_run_status_and_interrupts")
+
+
+@pytest.mark.xdist_group("gpf-ip-bot")
+def test_ip_short() -> None:
+    result, res = filter_run("bot", "verilator", 1, 3, 256, seed=7, verilator_opt=SHORT_OPT,
+                             ip=True)
+    check_run(result, res, 3, 256, 1, tests=len(IP_TESTS))
+
+
+@pytest.mark.regress
+@pytest.mark.parametrize("config,lanes,particles", [("bot", 1, 2048), ("uav", 2, 512)])
+def test_ip_regression(config: str, lanes: int, particles: int) -> None:
+    result, res = filter_run(config, "verilator", lanes, 50, particles, seed=13, ip=True)
+    check_run(result, res, 50, particles, lanes, tests=len(IP_TESTS))
 
 
 @pytest.mark.regress
@@ -215,6 +239,13 @@ FILTER_MUTANTS = {
     # it overwrites a particle's process draws, and only the values show it
     "draws-fifo-depth": ("gpf_bot", "gpf.sv.j2", ".DEPTH_LOG2({{ fifo_depth_log2 }})",
                          ".DEPTH_LOG2(2)", None, {}),
+    # AXI4-Stream protocol (tb/stream.py's checks): the estimate's LSB flipped only while m_est
+    # is offered and not taken; every value checked at the handshake is right. test_stalls
+    # stalls m_est half the clocks: five steps (a scenario given) for a result beat that stalls
+    # (seed 1: the third; two steps would leave a quarter of seeds none)
+    "ctrl-stall-est": ("ctrl", "ctrl.sv.j2", "assign m_est_tdata = est_q;",
+                       "assign m_est_tdata = est_q ^ {{ est_w }}'(m_est_tvalid && !m_est_tready);",
+                       "bot_fixed_observer", {}, "test_stalls"),
 }
 
 
@@ -231,6 +262,51 @@ def test_mutant_fails_the_filter(tmp_path: Path, mutant: str) -> None:
                      extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
     assert result.tests == 1
     assert result.failed == 1, f"mutant {mutant} of {module} survived the whole filter"
+
+
+# gpf_<app>_axi's mutants (template, old, new, the test that must fail): each must fail the IP's
+# own checks (framing, registers, side effects) while the core is untouched
+IP_MUTANTS = {
+    "ip-est-tlast": ("gpf_axi.sv.j2", "assign m_est_tlast = 1'b1;",
+                     "assign m_est_tlast = 1'b0;", "test_filter"),
+    "ip-padding": ("gpf_axi.sv.j2",
+                   "assign m_est_tdata = {{ padded('c_est_data', est_w, est_bytes) }};",
+                   "assign m_est_tdata = {{ est_bytes * 8 }}'(c_est_data) | (1 << {{ est_w }});",
+                   "test_filter"),   # bot's m_est: 849 bits in 107 bytes
+    "ip-seed-stale": ("gpf_axi.sv.j2", "if (seed_push_q) begin",
+                      "if (hwif_out.seed_hi.value.swmod) begin", "test_filter"),
+    "ip-particles-from-stream": (
+        "gpf_axi.sv.j2", "({s_init_tdata[{{ init_w - 1 }}:PW], hwif_out.particles.count.value})",
+        "(s_init_tdata[{{ init_w - 1 }}:0])", "test_filter"),
+    "ip-run-ignored": ("gpf_axi.sv.j2", "assign c_step_valid = s_step_tvalid && run;",
+                       "assign c_step_valid = s_step_tvalid;", "test_run_status_and_interrupts"),
+    "ip-soft-reset-unwired": ("gpf_axi.sv.j2",
+                              "rst_q <= !aresetn || hwif_out.ctrl.soft_reset.value;",
+                              "rst_q <= !aresetn;", "test_run_status_and_interrupts"),
+    "ip-irq-unmasked": ("gpf_regs.rdl.j2",
+                        "int_status.step_done->enable = int_enable.step_done;", "",
+                        "test_run_status_and_interrupts"),
+}
+
+
+# make test: one of each kind (framing, the seed's path, the register description); make regress:
+# the rest (a Verilator build each)
+IP_MUTANTS_IN_TEST = ("ip-est-tlast", "ip-seed-stale", "ip-irq-unmasked")
+
+
+@pytest.mark.parametrize("mutant", [
+    pytest.param(m, marks=[] if m in IP_MUTANTS_IN_TEST else [pytest.mark.regress])
+    for m in IP_MUTANTS])
+def test_mutant_fails_the_ip(tmp_path: Path, mutant: str) -> None:
+    template, old, new, testcase = IP_MUTANTS[mutant]
+    templates = mutated_templates(tmp_path, mutant, template, old, new)
+    spec = {"steps": 2, "particles": 32}
+    result = run_sim(load_config("configs/bot.toml"), "gpf_bot_axi", "verilator", seed=1,
+                     testcase=testcase, template_dir=templates, build_root=tmp_path / "build",
+                     log_file=tmp_path / "sim.log", verilator_opt=SHORT_OPT,
+                     extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
+    assert result.tests == 1
+    assert result.failed == 1, f"mutant {mutant} of gpf_bot_axi survived its tests"
 
 
 CAMPAIGN_PARTICLES = 10_000_000
