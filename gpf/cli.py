@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from gpf.config import APP_FORMATS, WORD_BITS, ConfigError, load_config
+from gpf.interrupt import Interrupted, stop_all_on_signal
 from gpf.toolchain import ToolchainError, check_simulator, check_writable
 
 EXIT_FAILED = 1
@@ -639,7 +640,8 @@ def main(argv: list[str] | None = None) -> int:
             if "\0" in arg:   # no path can hold it (only a caller from Python can pass it)
                 raise UsageError(f"argument {arg!r}: contains a NUL byte")
         args = build_parser().parse_args(argv)
-        return args.func(args)
+        with stop_all_on_signal():
+            return args.func(args)
     except (UsageError, ConfigError, ToolchainError) as exc:
         print(f"gpf: error: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
@@ -649,6 +651,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gpf: error: {_one_line(f'{where}{exc.strerror or exc}')}: check the path and "
               "its permissions", file=sys.stderr)
         return EXIT_USAGE
+    except Interrupted as exc:   # SIGINT or SIGTERM: the children stopped already
+        print(f"gpf: stopped by {exc}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         return 130
 
