@@ -8,11 +8,11 @@ bit-exactly; area and clock from gpf.synth and gpf.timing on the same generated 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from gpf.config import load_config
+from gpf.outputs import write_json
 from gpf.run import RunArgs, run_filter
 
 SEED003_CYCLES = 3160       # seed 003's HLS design at N = 2048: 31.6 us at 100 MHz
@@ -118,8 +118,7 @@ def main(out: Path = Path("build/bench.json")) -> int:
     lines, speed = speed_table()
     report["particles_per_second"] = speed
     print("\n".join(lines))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=1) + "\n")
+    write_json(out, report)
     print(f"\n-> {out}")
     return 0
 

@@ -1,7 +1,8 @@
 """The `gpf` command: generate RTL, run models and simulations, lint, open waves.
 
 Every user error (bad config, bad argument, missing tool) ends in one line on stderr and exit
-status 2; a simulation or check that fails ends with status 1.
+status 2; a simulation or check that fails ends with status 1; an internal error (a bug) in one
+line and status 3, its traceback with `gpf --debug`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from gpf.toolchain import ToolchainError, check_simulator, check_writable
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+EXIT_BUG = 3             # an internal error (a traceback with --debug)
 BUILD = Path("build")
 SEED_MAX = (1 << 32) - 1        # cocotb's and the scenarios' seeds (runs print 32-bit ones)
 STEPS_MAX = 100_000             # as filter.steps
@@ -108,6 +110,22 @@ def _out_dir(name: str, path: str | None) -> None:
         check_writable(Path(path), f"choose another {name} or fix the folder's permissions")
 
 
+def _inputs(cfg, scenario: str | None = None) -> list[tuple[str, str | None]]:
+    """The files a command reads: the config, a scenario CSV."""
+    csv = scenario if scenario is not None and scenario.endswith(".csv") else None
+    return [("the config", cfg.source or None), ("the scenario file", csv)]
+
+
+def _no_clash(outputs: list[tuple[str, Any]], inputs: list[tuple[str, str | None]]) -> None:
+    """Before any work: no output over an input (gpf.outputs.check_outputs), one line."""
+    from gpf.outputs import OutputError, check_outputs
+
+    try:
+        check_outputs(outputs, inputs)
+    except OutputError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def _build_dir(cfg) -> Path:
     folder = BUILD / cfg.name
     check_writable(folder, "run gpf from the project folder as a user who can write build/, "
@@ -125,7 +143,12 @@ def cmd_generate(args: argparse.Namespace) -> int:
     check_writable(out_dir, "choose another --out or fix the folder's permissions"
                    if args.out else "run gpf from a folder where it can write build/, or "
                    "give --out")
-    out = generate(cfg, out_dir)
+    from gpf.outputs import OutputError
+
+    try:   # it renders first and refuses, before writing, a file name that is the config
+        out = generate(cfg, out_dir)
+    except OutputError as exc:
+        raise UsageError(str(exc)) from None
     for files in out.files.values():
         for path in files:
             print(path)
@@ -142,11 +165,17 @@ def cmd_model_grng(args: argparse.Namespace) -> int:
         raise UsageError(f"--samples {args.samples}: must be at least 1")
     _range("--samples", args.samples, 1, SAMPLES_MAX)
     _range("--seed", args.seed, 0, (1 << 64) - 1)   # a seed load: 64 bits, as grng.seed
+    from gpf.outputs import atomic_path
+
+    # numpy.save adds .npy to a name without it: that is the file written, checked, printed
     out = _out_file("--out", args.out)
+    if not args.out.endswith(".npy"):
+        out = _out_file("--out", f"{args.out}.npy")
     cfg = _config(args)
+    _no_clash([("--out", out)], _inputs(cfg))
     samples = GrngModel(cfg).normals(args.samples, seed=args.seed)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.save(out, samples)
+    with atomic_path(out) as tmp:
+        np.save(tmp, samples)
     print(f"{out}: {samples.shape[0]} x {samples.shape[1]} samples of {cfg.noise} "
           f"(seed {args.seed}), mean {samples.mean():+.5f}, std {samples.std():.5f}")
     return 0
@@ -170,8 +199,6 @@ def _positive(name: str, value: int | None) -> None:
 
 
 def cmd_model_run(args: argparse.Namespace) -> int:
-    import json
-
     import numpy as np
 
     from gpf.study.montecarlo import monte_carlo
@@ -190,6 +217,15 @@ def cmd_model_run(args: argparse.Namespace) -> int:
         raise UsageError(f"--particles {args.particles}: must be a multiple of "
                          f"filter.lanes = {cfg.lanes}")
     _check_word(args.word, cfg)
+    from gpf.outputs import write_json
+    from gpf.study.montecarlo import DEFAULT_SCENARIO
+    from gpf.study.plots import plot_files
+
+    csv = args.scenario is not None and args.scenario.endswith(".csv")
+    stem = f"{cfg.name}_{'file' if csv else args.scenario or DEFAULT_SCENARIO[cfg.app]}"
+    _no_clash([("--json", out), *(("--plot", p) for p in
+                                  (plot_files(args.plot, stem) if args.plot else []))],
+              _inputs(cfg, args.scenario))
     try:
         mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
                          seed=args.seed, word=args.word, scenario=_scenario_arg(args.scenario))
@@ -201,9 +237,8 @@ def cmd_model_run(args: argparse.Namespace) -> int:
         est = {"truth": mc.truth[0], **first}
         summary["plots"] = plot_run(
             cfg.app, est, cfg.dt, f"{cfg.name} {mc.scenario}, N = {mc.particles}, first of "
-            f"{mc.runs} runs", args.plot, f"{cfg.name}_{mc.scenario}", mc.observer)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(summary, indent=1) + "\n")
+            f"{mc.runs} runs", args.plot, stem, mc.observer)
+    write_json(out, summary)   # strict: a value that could not be computed is null
     for line in model_run_lines(cfg.name, mc, summary):
         print(line)
     print(f"  -> {out}")
@@ -212,31 +247,35 @@ def cmd_model_run(args: argparse.Namespace) -> int:
 
 def model_run_lines(name: str, mc, summary: dict) -> list[str]:
     """`gpf model run`'s report: every metric (all steps, last 20 %), lost tracks, flags."""
+    from gpf.outputs import fmt
+
     lines = [f"{name} {mc.scenario}: {mc.runs} runs x {mc.steps} steps, N = {mc.particles}"
              + (f", word {mc.word}" if mc.word else "")]
     for metric, m in summary["metrics"].items():
         for window in ("all", "last20"):
             w = m[window]
-            noise = w["ratio_std_error"]
             lines.append(f"  {metric:8s} {'all steps' if window == 'all' else 'last 20 %':9s} "
-                         f"RMSE ({m['unit']}): float {w['float']:.5g}, fixed {w['fixed']:.5g}, "
-                         f"ratio {w['ratio']:.4f}" + (f" +- {noise:.4f}" if noise else "")
-                         + f" (float, numpy's draws: {w['float_numpy']:.5g})")
-    if "lost_tracks" in summary:
+                         f"RMSE ({m['unit']}): float {fmt(w['float'], '.5g')}, fixed "
+                         f"{fmt(w['fixed'], '.5g')}, ratio {fmt(w['ratio'], '.4f')} +- "
+                         f"{fmt(w['ratio_std_error'], '.4f')} (float, numpy's draws: "
+                         f"{fmt(w['float_numpy'], '.5g')})")
+    if summary.get("lost_tracks") is not None:
         lines.append(f"  lost tracks (last 20 % > {summary['lost_factor']:g} x float64): "
                      f"{summary['lost_tracks']} of {mc.runs}"
                      + (f" (runs {summary['lost_runs']})" if summary["lost_runs"] else ""))
     else:
-        lines.append("  no truth in the scenario: no errors, only the estimates")
+        lines.append("  no truth in the scenario: RMSE n/a, ratio n/a, lost tracks n/a (only "
+                     "the estimates)")
     flags = {k: v for k, v in summary["flag_steps"].items() if v}
     lines.append(f"  flagged steps, fixed point: {flags or 'none'}; float64: "
                  f"{ {k: v for k, v in summary['float_flag_steps'].items() if v} or 'none'}; "
-                 f"mean ESS fixed {summary['ess_mean']['fixed']:.1f}, float "
-                 f"{summary['ess_mean']['float']:.1f}")
+                 f"mean ESS fixed {fmt(summary['ess_mean']['fixed'], '.1f')}, float "
+                 f"{fmt(summary['ess_mean']['float'], '.1f')}")
     return lines
 
 
 def cmd_model_wordlength(args: argparse.Namespace) -> int:
+    from gpf.outputs import fmt
     from gpf.study.metrics import METRICS
     from gpf.study.montecarlo import monte_carlo
 
@@ -275,8 +314,9 @@ def cmd_model_wordlength(args: argparse.Namespace) -> int:
             cells = []
             for name in metrics:
                 m = s["metrics"][name]
-                cells.append(f"{m['last20']['float']:.4g} / {m['last20']['fixed']:.4g} / "
-                             f"{m['last20']['ratio']:.3f} ({m['all']['ratio']:.3f})")
+                cells.append(f"{fmt(m['last20']['float'])} / {fmt(m['last20']['fixed'])} / "
+                             f"{fmt(m['last20']['ratio'], '.3f')} "
+                             f"({fmt(m['all']['ratio'], '.3f')})")
             flags = ", ".join(f"{k} {v}" for k, v in s["flag_steps"].items() if v) or "-"
             print(f"| {word} | " + " | ".join(cells) + f" | {s['lost_tracks']} | {flags} |",
                   flush=True)
@@ -342,9 +382,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    import json
-
-    from gpf.run import RunArgs, plot, run_filter, summary_lines
+    from gpf.outputs import write_json
+    from gpf.run import RunArgs, plot, plot_paths, run_filter, run_warnings, summary_lines
 
     for name in ("steps", "particles"):
         _positive(f"--{name}", getattr(args, name))
@@ -377,16 +416,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.ip and (args.gate or args.sim != "verilator"):
         raise UsageError("--ip: the IP block runs on Verilator, as RTL (not with --gate or "
                          "--sim icarus)")
+    run_args = RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves, args.gate,
+                       args.ip)
+    _no_clash([("--json", out), *(("--plot", p) for p in
+                                  (plot_paths(cfg, run_args, args.plot) if args.plot else []))],
+              [*_inputs(cfg, scenario), ("the generated RTL in", BUILD / cfg.name / "rtl")])
     # here, not in the simulation's thread: a missing tool is one line, not a traceback
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
     _check_gate_tools(args.gate)
-    res = run_filter(cfg, RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves,
-                                  args.gate, args.ip))
+    res = run_filter(cfg, run_args)
     if args.plot:
         res["plots"] = plot(res, cfg, Path(args.plot))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1) + "\n")
+    res["warnings"] = run_warnings(res)   # saturation, a lost track: beside the verdict
+    write_json(out, res)   # strict: a value that could not be computed is null
     for line in summary_lines(res):
         print(line)
     for path in res.get("plots", []):
@@ -430,12 +473,14 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    import json
-
+    from gpf.config import for_family
+    from gpf.outputs import write_json
     from gpf.synth import SynthError, format_area, synthesize, yosys_command
 
     cfg, module = _hw_target(args)
     out = _out_file("--json", args.json) if args.json else None
+    _no_clash([("--json", out)], [*_inputs(cfg), ("the generated RTL in",
+                                                  BUILD / for_family(cfg, "xc7").name / "rtl")])
     _build_dir(cfg)
     yosys_command()     # installed, before the long part starts
     print(f"gpf synth: {module}, config {cfg.name}, LANES {cfg.lanes}: Yosys synth_xilinx "
@@ -451,16 +496,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(f"  yosys: {warning}")
     report = area.log.parent / "area.json"
     if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(area.to_json(), indent=1) + "\n")
+        write_json(out, area.to_json())
         report = out
     print(f"  -> {report} (log: {area.log})")
     return 0
 
 
 def cmd_timing(args: argparse.Namespace) -> int:
-    import json
-
+    from gpf.outputs import write_json
     from gpf.synth import SynthError, yosys_command
     from gpf.timing import nextpnr_command, place_and_route
 
@@ -481,7 +524,7 @@ def cmd_timing(args: argparse.Namespace) -> int:
         print(f"gpf timing: FAILED: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILED
     report = t.log.parent / "timing.json"
-    report.write_text(json.dumps(t.to_json(), indent=1) + "\n")
+    write_json(report, t.to_json())
     if t.dsp_registers:
         d = t.dsp_registers
         print(f"  DSP registers: {d['inputs']} operands and {d['outputs']} products of "
@@ -511,6 +554,8 @@ def cmd_waves(args: argparse.Namespace) -> int:
 
 def build_parser() -> Parser:
     parser = Parser(prog="gpf", description=__doc__)
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an internal error (a bug in gpf)")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def with_config(p: argparse.ArgumentParser) -> None:
@@ -641,7 +686,17 @@ def main(argv: list[str] | None = None) -> int:
                 raise UsageError(f"argument {arg!r}: contains a NUL byte")
         args = build_parser().parse_args(argv)
         with stop_all_on_signal():
-            return args.func(args)
+            try:
+                return args.func(args)
+            except (UsageError, ConfigError, ToolchainError, OSError, KeyboardInterrupt):
+                raise
+            except Exception as exc:   # a bug, not the user's input: one line unless --debug
+                if args.debug:
+                    raise
+                print(f"gpf: internal error: {type(exc).__name__}: {_one_line(str(exc))} (a "
+                      "bug in gpf: `gpf --debug ...` shows where; please report it)",
+                      file=sys.stderr)
+                return EXIT_BUG
     except (UsageError, ConfigError, ToolchainError) as exc:
         print(f"gpf: error: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE

@@ -55,6 +55,7 @@ def main(input_file: str) -> int:
     import yaml
 
     from gpf.config import load_config
+    from gpf.outputs import atomic_write_text
     from gpf.rtl.generate import generate
 
     spec = yaml.safe_load(Path(input_file).read_text())
@@ -79,7 +80,7 @@ def main(input_file: str) -> int:
         hook = [sys.executable, "-m", "gpf.cli", command, "--config", str(config), *args]
     name = spec["vlnv"].split(":")[2]
     description = f"gpf generate --config {params['config']}: {module}"
-    Path(f"{name}.core").write_text(core_text(spec["vlnv"], description, files, hook))
+    atomic_write_text(f"{name}.core", core_text(spec["vlnv"], description, files, hook))
     return 0
 
 

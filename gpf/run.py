@@ -5,6 +5,7 @@ the fixed-point model, and a summary (JSON, plots) of what was checked, how fast
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 from dataclasses import dataclass
@@ -14,6 +15,7 @@ from typing import Any
 from tqdm import tqdm
 
 from gpf.config import Config
+from gpf.outputs import fmt
 from gpf.sim import run_sim, sim_build_dir
 
 
@@ -72,11 +74,22 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                            f"failed): see {log}")
     res = json.loads(out.read_text())
     wall = time.monotonic() - start
-    res.update(sim=args.sim + (" gate-level" if args.gate else ""),
+    res.update(sim=sim_label(args),
                total_seconds=round(wall, 2), passed=sim.passed, log=str(log),
                particles_per_second=round(res["particles_checked"] / res["wall_seconds"], 1),
                waves=str(sim.waves) if sim.waves else None)
     return res
+
+
+def sim_label(args: RunArgs) -> str:
+    return args.sim + (" gate-level" if args.gate else "")
+
+
+def plot_paths(cfg: Config, args: RunArgs, directory: str | Path) -> list[str]:
+    """The files plot() may write for this run (checked against the inputs first)."""
+    from gpf.study.plots import plot_files
+
+    return plot_files(directory, f"{cfg.name}_{sim_label(args)}")
 
 
 def _progress(path: Path) -> tuple[int, int] | None:
@@ -85,6 +98,31 @@ def _progress(path: Path) -> tuple[int, int] | None:
         return int(step), int(mismatches)
     except (OSError, ValueError):
         return None
+
+
+def _ranges(steps: list[int]) -> str:
+    """[2, 3, 4, 5, 9] -> "2-5, 9"."""
+    runs: list[list[int]] = []
+    for k in steps:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+
+
+def run_warnings(res: dict[str, Any]) -> list[str]:
+    """What a bit-exact run may still hide: saturated values (flag `sat` in any step's flags,
+    step k = 1.. in order) and a lost track; one line each, for the summary and the JSON."""
+    out = []
+    sat = [k for k, flags in enumerate(res.get("flags") or [], start=1) if "sat" in flags]
+    if sat:
+        out.append(f"WARNING: values saturated at step{'s' if len(sat) > 1 else ''} "
+                   f"{_ranges(sat)} (SAT): the fixed-point formats cannot hold this scenario")
+    if res.get("lost_track"):
+        out.append("WARNING: the filter lost track (its error over the last 20 % is above 3 x "
+                   "float64's on the same draws)")
+    return out
 
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
@@ -98,17 +136,19 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     ]
     for name, m in res["metrics"].items():
         lines.append(f"  {name} RMSE ({m['unit']}), all / last 20 %: " + ", ".join(
-            f"{k} {m['all'][k]:.4g} / {m['last20'][k]:.4g}" for k in ("rtl", "fixed", "float")))
+            f"{k} {fmt(m['all'][k])} / {fmt(m['last20'][k])}" for k in ("rtl", "fixed", "float")))
+    quantisation = _known(res["quantisation_error"])
     if res["metrics"]:
         lines.append(f"  lost track (last 20 % > 3 x float64): "
                      f"{'YES' if res['lost_track'] else 'no'}; rtl vs float64 (same draws) per "
-                     f"step: max {max(res['quantisation_error']):.3g}")
-    ess = [e for e in res["ess"] if e is not None]
+                     f"step: max {fmt(max(quantisation, default=None), '.3g')}")
+    ess = _known(res["ess"])
     flagged = {f: sum(f in flags for flags in res["flags"]) for f in
                ("sat", "zero_weights", "not_pd", "low_ess")}
     lines += [
-        f"  effective sample size: mean {sum(ess) / len(ess):.1f}, min {min(ess):.1f}; steps "
-        "flagged: " + (", ".join(f"{k} {v}" for k, v in flagged.items() if v) or "none"),
+        f"  effective sample size: mean {fmt(sum(ess) / len(ess) if ess else None, '.1f')}, "
+        f"min {fmt(min(ess, default=None), '.1f')}; steps flagged: "
+        + (", ".join(f"{k} {v}" for k, v in flagged.items() if v) or "none"),
         f"  cycles per step: min {min(cycles)}, max {max(cycles)} (N/LANES + "
         f"{max(cycles) - res['particles'] // res['lanes']})",
         f"  {res['particles_per_second']:.0f} particles checked/s ({res['wall_seconds']:.1f} s "
@@ -116,7 +156,12 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     ]
     if res["first_mismatch"]:
         lines.append(f"  first mismatch: {res['first_mismatch']}")
-    return lines
+    return lines + [f"  {w}" for w in run_warnings(res)]
+
+
+def _known(values: list) -> list[float]:
+    """The values that could be computed (null in JSON, NaN in memory: left out)."""
+    return [v for v in values if v is not None and math.isfinite(v)]
 
 
 def plot(res: dict[str, Any], cfg: Config, directory: Path) -> list[str]:

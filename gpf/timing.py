@@ -21,6 +21,7 @@ from pathlib import Path
 
 from gpf.config import Config, for_family
 from gpf.dsp_registers import pack_dsp_registers
+from gpf.outputs import atomic_write_text
 from gpf.rtl.generate import MODULES
 from gpf.synth import SynthError, read_sources, rtl_files, run_yosys
 from gpf.toolchain import ToolchainError
@@ -123,7 +124,7 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
     if dsp_registers:
         packed = pack_dsp_registers(design).__dict__
         placed = folder / "packed.json"
-        placed.write_text(json.dumps(design))
+        atomic_write_text(placed, json.dumps(design))   # a netlist: no floats
     try:
         run = subprocess.run([*nextpnr_command(), *DEVICE, "--out-of-context",
                               "--json", placed.name, "--freq", f"{target_mhz:g}",

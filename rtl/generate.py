@@ -7,9 +7,7 @@ from the same model objects the testbenches check against, so no constant is typ
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +32,7 @@ from gpf.model.fixed import Format
 from gpf.model.formats import CONST_WIDTH, INV_GUARD, SHIFT_BITS, datapath
 from gpf.model.formats import constants as datapath_constants
 from gpf.model.primitives import Cordic, recip
+from gpf.outputs import atomic_write_text, check_outputs, json_text
 from gpf.rtl.filter import axi_context, filter_context
 from gpf.rtl.regs import ICARUS_GAP, register_files
 
@@ -1233,16 +1232,17 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
             "constants": {k: v for k, v in context.items()
                           if isinstance(v, int | str) and k not in ("lanes",)},
         }
-    texts["manifest.json"] = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
+    texts["manifest.json"] = json_text(manifest, indent=2, sort_keys=True)
     if cfg.source:
         texts["config.toml"] = Path(cfg.source).read_text() + "".join(
             f"# overridden: {key} = {value!r}\n" for key, value in cfg.overrides.items())
+    # nothing written yet: never over the config (a --out that is the config's folder)
+    check_outputs([("--out", out_dir / fname) for fname in texts],
+                  [("the config", cfg.source)] if cfg.source else [])
     out_dir.mkdir(parents=True, exist_ok=True)
     for fname, text in texts.items():
         path = out_dir / fname
         if not path.exists() or path.read_text() != text:
             # atomic: simulations of other modules may be reading this folder right now
-            tmp = path.with_name(f".{fname}.{os.getpid()}.tmp")
-            tmp.write_text(text)
-            os.replace(tmp, path)
+            atomic_write_text(path, text)
     return Generated(out_dir, files, manifest)

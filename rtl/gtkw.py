@@ -46,6 +46,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
+from gpf.outputs import atomic_write_text
+
 __all__ = ["Group", "Trace", "render_gtkw", "write_gtkw"]
 
 # Trace flag bits: `enum TraceEntFlagBits` and the TR_* macros in GTKWave's src/analyzer.h
@@ -104,7 +106,7 @@ class Group:
 def write_gtkw(path: Path, dumpfile: Path, groups: list[Group],
                window_ps: int | None = None) -> None:
     """Write the save file for ``dumpfile`` to ``path`` (see ``render_gtkw``)."""
-    Path(path).write_text(render_gtkw(dumpfile, groups, window_ps), encoding="utf-8")
+    atomic_write_text(path, render_gtkw(dumpfile, groups, window_ps))
 
 
 def render_gtkw(dumpfile: Path, groups: list[Group], window_ps: int | None = None) -> str:

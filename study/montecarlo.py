@@ -148,6 +148,10 @@ class MonteCarlo:
                         "ratio_fixed_float": ratio, "ratio_std_error": _finite(noise),
                         "lost_tracks": len(self.lost_tracks()),
                         "lost_runs": self.lost_tracks(), "lost_factor": LOST_FACTOR})
+        else:   # a recording: what needs truth cannot be computed (null, "n/a" in text)
+            out.update({"rmse": dict.fromkeys(("float", "fixed", "float_numpy_draws")),
+                        "ratio_fixed_float": None, "ratio_std_error": None,
+                        "lost_tracks": None, "lost_runs": None, "lost_factor": LOST_FACTOR})
         if self.has_truth:
             out["per_run_last20"] = self.per_run_last20()
         out["per_step"] = self.first_run()

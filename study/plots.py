@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf.outputs import atomic_path
 from gpf.study.metrics import METRICS, euler_deg
 
 STYLE = {"truth": ("k", "-"), "float": ("tab:blue", "--"), "fixed": ("tab:green", "-."),
@@ -29,6 +30,20 @@ def _pyplot():
 def _line(ax, t, y, name: str, **kw) -> None:
     colour, style = STYLE[name]
     ax.plot(t, y, color=colour, linestyle=style, label=LABEL[name], **kw)
+
+
+def plot_files(directory: str | Path, stem: str) -> list[str]:
+    """Every file plot_run(..., directory, stem) may write (the error figure needs truth)."""
+    return [str(Path(directory) / f"{stem}_{kind}.png") for kind in ("estimate", "error")]
+
+
+def _save(plt, fig, path: str) -> None:
+    """A temporary file renamed into place when complete (gpf.outputs)."""
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def plot_run(app: str, est: dict[str, np.ndarray], dt: float, title: str, directory: str | Path,
@@ -71,9 +86,8 @@ def plot_run(app: str, est: dict[str, np.ndarray], dt: float, title: str, direct
         ax = axes[0, 0]
     ax.legend(fontsize=8)
     fig.tight_layout()
-    files.append(str(out / f"{stem}_estimate.png"))
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(plot_files(out, stem)[0])
+    _save(plt, fig, files[-1])
     if not has_truth:
         return files
     metrics = METRICS[app][:3]
@@ -88,7 +102,6 @@ def plot_run(app: str, est: dict[str, np.ndarray], dt: float, title: str, direct
     axes[0, 0].legend(fontsize=8)
     axes[0, 0].set_title(f"{title}: errors")
     fig.tight_layout()
-    files.append(str(out / f"{stem}_error.png"))
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(plot_files(out, stem)[1])
+    _save(plt, fig, files[-1])
     return files

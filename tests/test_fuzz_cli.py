@@ -26,7 +26,7 @@ FAST = settings(max_examples=60, deadline=None,
 SHIPPED = {app: tomllib.loads(Path(f"configs/{app}.toml").read_text()) for app in ("bot", "uav")}
 
 
-class StartedError(Exception):
+class StartedError(BaseException):
     """The command got past its checks and would now do its work."""
 
 

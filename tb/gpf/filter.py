@@ -26,6 +26,7 @@ from gpf.model.float_gpf import FloatGPF
 from gpf.model.formats import SHIFT_BITS
 from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
+from gpf.outputs import write_json
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
@@ -394,5 +395,4 @@ def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray)
 
 def write_result(res: RunResult, path: str | None) -> None:
     if path:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(json.dumps(asdict(res), indent=1) + "\n")
+        write_json(path, asdict(res))   # strict JSON (NaN as null), renamed into place
