@@ -92,6 +92,10 @@ def _check_word(word: int | None, cfg) -> None:
         if word is not None and word < fmt.width - fmt.frac_bits:
             raise UsageError(f"--word {word}: narrower than the integer part of formats.{name} "
                              f"= '{fmt}' (needs at least {fmt.width - fmt.frac_bits} bits)")
+    if word is not None:   # the datapath resized: its constants and sums as load_config's
+        from gpf.limits import check_datapath
+
+        check_datapath(cfg, word, prefix=f"{cfg.name}: ")
 
 
 def _out_file(name: str, path: str) -> Path:
@@ -181,14 +185,15 @@ def cmd_model_grng(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenario_arg(text: str | None):
-    """A scenario name, or a CSV file (read once: every run filters the same data)."""
+def _scenario_arg(text: str | None, cfg=None):
+    """A scenario name, or a CSV file (read once: every run filters the same data), checked
+    against the config it is filtered with (gpf.limits)."""
     if text is None or not text.endswith(".csv"):
         return text
     from gpf.model.scenarios import read_csv
 
     try:
-        return read_csv(text)
+        return read_csv(text, cfg)
     except (OSError, ValueError) as exc:
         raise UsageError(f"--scenario {text}: {exc}") from None
 
@@ -207,15 +212,15 @@ def cmd_model_run(args: argparse.Namespace) -> int:
     for name in ("steps", "particles", "runs"):
         _positive(f"--{name}", getattr(args, name))
     _range("--steps", args.steps, 1, STEPS_MAX)
-    _range("--particles", args.particles, 2, PARTICLES_MAX)
     _range("--seed", args.seed, 0, SEED_MAX)
     _range("--word", args.word, *WORD_BITS)
     out = _out_file("--json", args.json)
     _out_dir("--plot", args.plot)
     cfg = _config(args)
-    if args.particles is not None and args.particles % cfg.lanes:
-        raise UsageError(f"--particles {args.particles}: must be a multiple of "
-                         f"filter.lanes = {cfg.lanes}")
+    from gpf.limits import check_particles, check_scenario_name
+
+    check_particles(cfg, args.particles)   # as gpf run's: [2, filter.particles], x LANES
+    check_scenario_name(cfg, args.scenario)
     _check_word(args.word, cfg)
     from gpf.outputs import write_json
     from gpf.study.montecarlo import DEFAULT_SCENARIO
@@ -228,7 +233,8 @@ def cmd_model_run(args: argparse.Namespace) -> int:
               _inputs(cfg, args.scenario))
     try:
         mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
-                         seed=args.seed, word=args.word, scenario=_scenario_arg(args.scenario))
+                         seed=args.seed, word=args.word,
+                         scenario=_scenario_arg(args.scenario, cfg))
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     summary = mc.summary()
@@ -292,15 +298,15 @@ def cmd_model_wordlength(args: argparse.Namespace) -> int:
     for name in ("runs", "steps", "particles"):
         _positive(f"--{name}", getattr(args, name))
     _range("--steps", args.steps, 1, STEPS_MAX)
-    _range("--particles", args.particles, 2, PARTICLES_MAX)
     _range("--seed", args.seed, 0, SEED_MAX)
     cfgs = [load_config(config_path(name), parse_overrides(args.set))
             for name in args.config or ["bot", "uav"]]
+    from gpf.limits import check_particles
+
     for cfg in cfgs:
-        if args.particles % cfg.lanes:
-            raise UsageError(f"--particles {args.particles}: must be a multiple of "
-                             f"filter.lanes = {cfg.lanes} ({cfg.name})")
-        _check_word(words[0], cfg)
+        check_particles(cfg, args.particles)
+        for word in words:
+            _check_word(word, cfg)
     for cfg in cfgs:
         metrics = [m.name for m in METRICS[cfg.app][:3]]
         print(f"\n{cfg.name}: RMSE over the last 20 % of {args.runs} runs (all steps in "
@@ -392,21 +398,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = _out_file("--json", args.json)
     _out_dir("--plot", args.plot)
     cfg = _rtl_config(args)
-    particles = args.particles or cfg.particles
-    if particles > cfg.particles or particles % cfg.lanes:
-        raise UsageError(f"--particles {particles}: must be a multiple of filter.lanes = "
-                         f"{cfg.lanes} and at most filter.particles = {cfg.particles}")
-    scenario = args.scenario
-    if scenario is not None and not scenario.endswith(".csv"):
-        from gpf.study.montecarlo import SCENARIOS
+    from gpf.limits import check_particles, check_scenario_name
 
-        if scenario not in SCENARIOS or not scenario.startswith(cfg.app):
-            names = [s for s in SCENARIOS if s.startswith(cfg.app)]
-            raise UsageError(f"--scenario {scenario}: choose one of {', '.join(names)} "
-                             "or give a CSV file")
+    particles = check_particles(cfg, args.particles)   # as gpf model run's
+    scenario = args.scenario
+    check_scenario_name(cfg, scenario)   # as gpf model run's
     steps = args.steps or cfg.steps
     if scenario is not None and scenario.endswith(".csv"):
-        sc = _scenario_arg(scenario)
+        sc = _scenario_arg(scenario, cfg)
         if sc.app != cfg.app:
             raise UsageError(f"--scenario {scenario}: a {sc.app} scenario, config "
                              f"{cfg.name!r} is {cfg.app}")
@@ -449,8 +448,10 @@ def cmd_lint(args: argparse.Namespace) -> int:
     if not paths:
         raise UsageError("lint: no configs: give --config or run gpf in the project folder "
                          "(configs/*.toml)")
-    # every config at every lane count, before the first lint starts
+    # every config as written (its own lanes too, as every other command checks it), then at
+    # every lane count, before the first lint starts
     for path in paths:
+        _check_generates(load_config(path))
         for lanes in args.lanes or [1, 2, 4]:
             cfg = load_config(path, {"filter.lanes": lanes})
             _check_generates(cfg)
@@ -469,6 +470,14 @@ def cmd_list(args: argparse.Namespace) -> int:
 
     for name in MODULES:
         print(name)
+    return 0
+
+
+def cmd_limits(args: argparse.Namespace) -> int:
+    """The README's "Inputs and their limits", from the code that checks them."""
+    from gpf.config import limits_table
+
+    print(limits_table(), end="")
     return 0
 
 
@@ -664,6 +673,10 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("list", help="print every module name that `make sim MODULE=` accepts")
     p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("limits", help="print every input's validated range (the README's "
+                       "\"Inputs and their limits\")")
+    p.set_defaults(func=cmd_limits)
 
     p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
     with_config(p)

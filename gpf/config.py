@@ -127,6 +127,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 APP_FORMATS = {"bot": ("state",), "uav": ("quaternion", "velocity")}
+# the noise format s3.F: the inversion GRNG reaches 7.9 sigma (three integer bits, signed), and
+# a draw is one 18-bit multiplier operand (sample_cond's and the propagation's): F <= 14
+NOISE_FRAC_BITS = (4, 14)
 # the datapath word (the state formats' width) the generator can build: below 8 bits the
 # weight's exponent has no fraction, above 30 the CORDIC's and Cholesky's sums pass 63 bits
 WORD_BITS = (8, 30)
@@ -252,10 +255,11 @@ def _check_formats(values: dict[str, dict[str, Any]], app: str, prefix: str) -> 
             raise ConfigError(f"{prefix}formats.{name}: missing; app {app!r} needs it")
     out = {name: Format.parse(fmts[name]) for name in sorted(needed)}
     noise = out["noise"]
-    # the inversion GRNG reaches 7.9 sigma: three integer bits, signed, one DSP operand at most
-    if not (noise.signed and noise.int_bits == 3 and 4 <= noise.frac_bits <= 20):
+    lo, hi = NOISE_FRAC_BITS
+    if not (noise.signed and noise.int_bits == 3 and lo <= noise.frac_bits <= hi):
         raise ConfigError(f"{prefix}formats.noise = {fmts['noise']!r}: must be s3.F with "
-                          "F in [4, 20]")
+                          f"F in [{lo}, {hi}] (N(0, 1) draws to 7.9 sigma, one 18-bit "
+                          "multiplier operand)")
     if out["weight"].signed or out["weight"].int_bits != 1:
         raise ConfigError(f"{prefix}formats.weight = {fmts['weight']!r}: must be unsigned "
                           "with one integer bit, u1.F (weights 2^-t lie in (0, 1])")
@@ -273,6 +277,9 @@ def _check_formats(values: dict[str, dict[str, Any]], app: str, prefix: str) -> 
             raise ConfigError(f"{prefix}formats.{name} = {fmts[name]!r}: {width} bits; must "
                               f"be as wide as formats.{first} = {fmts[first]!r} "
                               f"({out[first].width} bits, one datapath word)")
+    if app == "uav" and out["quaternion"].int_bits < 1:
+        raise ConfigError(f"{prefix}formats.quaternion = {fmts['quaternion']!r}: must have at "
+                          "least one integer bit (a unit quaternion's |q_i| reaches 1)")
     return out
 
 
@@ -286,7 +293,7 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
                           f"of filter.lanes = {flt['lanes']}")
     formats = _check_formats(values, flt["app"], prefix)
     g = values["grng"]
-    return Config(
+    cfg = Config(
         name=name,
         source=source,
         app=flt["app"],
@@ -300,6 +307,11 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
         grng=GrngConfig(**g),
         app_params=values[flt["app"]],
     )
+    # every value against what the formats hold and the models assume (gpf/limits.py)
+    from gpf.limits import check_config
+
+    check_config(cfg, prefix)
+    return cfg
 
 
 def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
@@ -352,3 +364,15 @@ def _safe_name(name: str) -> str:
 
         safe = safe[:80] + "-" + hashlib.sha1(safe.encode()).hexdigest()[:12]
     return safe
+
+
+def limits_table() -> str:
+    """The README's "Inputs and their limits": every validated range, from the code that checks
+    them (gpf/limits.py); `gpf limits` and `python -m gpf.config` print it."""
+    from gpf.limits import limits_table as table
+
+    return table()
+
+
+if __name__ == "__main__":
+    print(limits_table(), end="")

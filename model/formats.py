@@ -199,6 +199,80 @@ def _exp2(t: Format, weight: Format) -> Exp2Neg:
     return Exp2Neg.for_formats(in_width=t.width, in_frac=t.frac_bits, out_frac=weight.frac_bits)
 
 
+# The config keys each derived constant (and h, uav's rate step omega dt/2) is computed from,
+# the key a refusal names first: gpf.limits names the first of them whose change fixes it.
+CONST_KEYS = {
+    "bot": {"T": ("filter.dt",), "T2": ("filter.dt",),
+            "a": ("bot.process_var", "filter.dt"), "b": ("bot.process_var", "filter.dt"),
+            "q_pp": ("bot.process_var", "filter.dt"), "q_pv": ("bot.process_var", "filter.dt"),
+            "q_vv": ("bot.process_var", "filter.dt"), "c_u": ("bot.bearing_var",)},
+    "uav": {"dt": ("filter.dt",), "dt2": ("filter.dt",), "h": ("filter.dt",),
+            "s_w": ("uav.sigma_omega_deg",), "s_a": ("uav.sigma_a",),
+            "q_q": ("uav.sigma_omega_deg", "filter.dt"), "q_v": ("uav.sigma_a", "filter.dt"),
+            "c_u": ("uav.sigma_v",), "g0": (), "g1": (), "g2": ()},
+}
+# blocks.round_sum and shift_round compute exact sums in int64: every sum must fit a signed
+# 62-bit word (shift_round's declared input), whatever the operands within their formats
+MODEL_SUM_BITS = 62
+
+
+def _sum_bits(terms: list[tuple[int, int]]) -> int:
+    """Signed bits of an exact sum of terms (signed width, fraction bits) at the largest
+    fraction, as blocks.round_sum forms it: the widest shifted term, a bit per doubling."""
+    top = max(f for _, f in terms)
+    return max(w + top - f for w, f in terms) + (len(terms) - 1).bit_length()
+
+
+def datapath_problems(dp: Datapath) -> list[tuple[tuple[str, ...], str]]:
+    """What of `dp`'s derived constants the models and the generator cannot represent, as
+    (the constants involved, a one-line reason); empty when all fit. Each constant must be
+    one 18-bit signed word with no negative fraction (|c| < 2^17: never a rescaled word); every
+    exact sum of the fixed-point model that takes one must fit MODEL_SUM_BITS (the sums of
+    blocks.propagate_bot and propagate_uav, mirrored here for operands anywhere in their
+    formats); the whitening product d c_u must keep a fraction bit below u's LSB to round
+    (the generator's weight block)."""
+    out: list[tuple[tuple[str, ...], str]] = []
+    c, w, ne = dp.consts, dp.word, dp.noise.width
+    fe, cw = dp.noise.frac_bits, CONST_WIDTH
+    for name, k in sorted(c.items()):
+        if k.frac < 0:
+            out.append(((name,), f"the constant {name} = {k.value:.4g} is not below "
+                                 f"2^{cw - 1} (one {cw}-bit word would need a scale of "
+                                 f"2^{-k.frac})"))
+
+    def fits(names: tuple[str, ...], what: str, terms: list[tuple[int, int]]) -> None:
+        bits = _sum_bits(terms)
+        if bits > MODEL_SUM_BITS:
+            at = ", ".join(f"{n} = {c[n].value:.4g}" if n in c else
+                           f"h = omega dt/2 at {dp.h_frac} fraction bits" for n in names)
+            out.append((names, f"{what} needs {bits}-bit exact sums ({at}); the model's sums "
+                               f"hold {MODEL_SUM_BITS}"))
+
+    if dp.app == "bot":
+        fx = dp.x[0].frac_bits
+        fits(("a", "T"), "propagate_bot's position sum",
+             [(w, fx), (w + cw, fx + c["T"].frac), (ne + cw, fe + c["a"].frac)])
+        fits(("b",), "propagate_bot's velocity sum", [(w, fx), (ne + cw, fe + c["b"].frac)])
+        d_frac = dp.angle_frac
+    else:
+        fg, fa, fq = dp.gyro.frac_bits, dp.accel.frac_bits, dp.x[0].frac_bits
+        fv = dp.x[4].frac_bits
+        fits(("s_w",), "propagate_uav's body-rate sum",
+             [(w, fg), (ne + cw, fe + c["s_w"].frac)])
+        fits(("s_a",), "propagate_uav's specific-force sum",
+             [(w, fa), (ne + cw, fe + c["s_a"].frac)])
+        fits(("h",), "propagate_uav's quaternion update",
+             [(w, fq)] + [(2 * w, dp.h_frac + fq)] * 3)
+        fits(("dt",), "propagate_uav's velocity sum", [(w, fv), (w + cw, fa + c["dt"].frac)])
+        d_frac = fv
+    prod_frac = d_frac + c["c_u"].frac
+    if prod_frac <= dp.u.frac_bits:
+        out.append((("c_u",), f"the whitening product d c_u (c_u = {c['c_u'].value:.4g}) has "
+                              f"{prod_frac} fraction bits; rounding it into u = {dp.u} needs "
+                              f"at least {dp.u.frac_bits + 1}"))
+    return out
+
+
 def constants(dp: Datapath) -> dict:
     """Everything the RTL of the filter blocks is generated from (JSON-able, for the manifest)."""
     out = {

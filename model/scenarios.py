@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from gpf.config import ConfigError
 from gpf.model import flight
 from gpf.model.float_blocks import Array, bot_matrices, wrap_angle
 
@@ -82,6 +83,13 @@ class Scenario:
         return out
 
 
+def _for_app(cfg: Any, app: str, name: str) -> None:
+    """A named scenario builds only for a config of its app: one line, not a KeyError."""
+    if cfg.app != app:
+        raise ConfigError(f"scenario {name} is for app {app!r}; config {cfg.name!r} is "
+                          f"{cfg.app!r}")
+
+
 def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str,
          x0: Array | None = None) -> Scenario:
     """Truth x_0 ~ N(x0, diag(sigma0_diag)) (x0 is the seed's initial *mean*, the config's
@@ -107,6 +115,7 @@ def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str,
 
 def bot_fixed_observer(cfg: Any, steps: int, seed: int) -> Scenario:
     """Seed 003's scenario: observer at the origin, so the range is unobservable."""
+    _for_app(cfg, "bot", "bot_fixed_observer")
     observer = np.zeros((steps + 1, 2))
     observer[0] = np.nan
     return _bot(cfg, steps, seed, observer, "bot_fixed_observer")
@@ -129,6 +138,7 @@ def bot_manoeuvring_observer(cfg: Any, steps: int, seed: int) -> Scenario:
     the nominal target velocity (x0's) and weaves at OBSERVER_WEAVE m/s across the initial line
     of sight in OBSERVER_LEG s legs (2.8-3.2 m/s for seed 003's x0): the observer's
     accelerations make the range observable."""
+    _for_app(cfg, "bot", "bot_manoeuvring_observer")
     x0 = np.array(cfg.app_params["x0"], dtype=float)
     los = x0[[0, 2]] / np.hypot(x0[0], x0[2])
     observer = observer_path(np.arange(steps + 1) * cfg.dt, x0[[1, 3]],
@@ -142,6 +152,7 @@ def uav_flight(cfg: Any, steps: int, seed: int) -> Scenario:
     IMU noise N(0, sigma_w^2) and N(0, sigma_a^2) per sample, GPS velocity noise N(0, sigma_v^2)
     every step. mu0 is the truth at k = 0 plus a draw from N(0, diag(sigma0_diag)), q normalised.
     """
+    _for_app(cfg, "uav", "uav_flight")
     p = cfg.app_params
     rng = np.random.default_rng(seed)
     truth, omega, accel = flight.integrate(steps, cfg.dt)
@@ -186,14 +197,15 @@ def write_csv(scenario: Scenario, path: str | Path) -> None:
     Path(path).write_text("\n".join(lines) + "\n")
 
 
-def read_csv(path: str | Path) -> Scenario:
-    """Read a scenario CSV; a malformed file raises a one-line ValueError naming the file, the
-    row (and its line number) and the column."""
+def read_csv(path: str | Path, cfg: Any = None) -> Scenario:
+    """Read a scenario CSV; a malformed file raises a one-line ConfigError (a ValueError) naming
+    the file, the row (k, and its line number) and the column. Given the config it is to be
+    filtered with, the recording is checked against it too (check_recording)."""
     path = Path(path)
     try:
         lines = path.read_text().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+        raise ConfigError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     header_at = 0
     info: dict[str, Any] = {}
     while header_at < len(lines) and (lines[header_at].startswith("#")
@@ -201,23 +213,25 @@ def read_csv(path: str | Path) -> Scenario:
         _read_meta(path, header_at + 1, lines[header_at], info)
         header_at += 1
     if header_at == len(lines):
-        raise ValueError(f"{path}: no header row")
+        raise ConfigError(f"{path}: no header row")
     app = _read_header(path, header_at + 1, lines[header_at])
     if info.get("app", app) != app:
-        raise ValueError(f"{path}: metadata app {info['app']!r} but the columns are {app}'s")
+        raise ConfigError(f"{path}: metadata app {info['app']!r} but the columns are {app}'s")
     names = COLUMNS[app]
     required = {c for group in (INPUTS[app], MEASUREMENTS[app]) for cs in group.values()
                 for c in cs}
     rows: list[list[float]] = []
+    line_of: list[int] = []      # the file's line number of each row
     for ln, text in enumerate(lines[header_at + 1:], start=header_at + 2):
         if not text.strip():
             continue
         fields = next(csv.reader([text]))
         r = len(rows)
+        line_of.append(ln)
         where = f"{path}: row {r} (line {ln})"
         if len(fields) != len(names):
-            raise ValueError(f"{where}: {len(fields)} fields, expected {len(names)}: "
-                             + ",".join(names))
+            raise ConfigError(f"{where}: {len(fields)} fields, expected {len(names)}: "
+                              + ",".join(names))
         row = []
         for c, f in zip(names, fields, strict=True):
             f = f.strip()
@@ -229,15 +243,15 @@ def read_csv(path: str | Path) -> Scenario:
             except ValueError:
                 v = math.nan
             if not f:
-                raise ValueError(f"{where}, column '{c}': empty, a number is required here")
+                raise ConfigError(f"{where}, column '{c}': empty, a number is required here")
             if not math.isfinite(v):
-                raise ValueError(f"{where}, column '{c}': {f!r} is not a finite number")
+                raise ConfigError(f"{where}, column '{c}': {f!r} is not a finite number")
             if c == "k" and v != r:
-                raise ValueError(f"{where}, column 'k': {f}, expected {r}")
+                raise ConfigError(f"{where}, column 'k': {f}, expected {r}")
             row.append(v)
         rows.append(row)
     if len(rows) < 2:
-        raise ValueError(f"{path}: {len(rows)} data rows; need k = 0 and at least one step")
+        raise ConfigError(f"{path}: {len(rows)} data rows; need k = 0 and at least one step")
     cols = dict(zip(names, np.array(rows).T, strict=True))
     t = cols["t"]
     dt = float(info.get("dt", t[1] - t[0]))
@@ -245,19 +259,67 @@ def read_csv(path: str | Path) -> Scenario:
     bad = np.flatnonzero(off > 1e-9 * np.maximum(1, np.abs(t)))
     if not dt > 0 or len(bad):
         r = int(bad[0]) if len(bad) else 1
-        raise ValueError(f"{path}: row {r} (line {header_at + 2 + r}), column 't': {t[r]!r} is "
-                         f"not t_0 + k dt with dt = {dt!r} > 0")
+        raise ConfigError(f"{path}: row {r} (line {line_of[r]}), column 't': {t[r]!r} is not "
+                          f"t_0 + k dt with dt = {dt!r} > 0")
     mu0 = info.get("mu0")
     if mu0 is not None and len(mu0) != len(TRUTH[app]):
-        raise ValueError(f"{path}: metadata mu0 has {len(mu0)} numbers, {app} needs "
-                         f"{len(TRUTH[app])}")
+        raise ConfigError(f"{path}: metadata mu0 has {len(mu0)} numbers, {app} needs "
+                          f"{len(TRUTH[app])}")
 
     def group(cs: tuple[str, ...]) -> Array:
         return cols[cs[0]].copy() if len(cs) == 1 else np.stack([cols[c] for c in cs], axis=1)
 
-    return Scenario(app, dt, t, {n: group(cs) for n, cs in INPUTS[app].items()},
-                    {n: group(cs) for n, cs in MEASUREMENTS[app].items()}, group(TRUTH[app]),
-                    None if mu0 is None else np.array(mu0, dtype=float), info.get("meta", {}))
+    sc = Scenario(app, dt, t, {n: group(cs) for n, cs in INPUTS[app].items()},
+                  {n: group(cs) for n, cs in MEASUREMENTS[app].items()}, group(TRUTH[app]),
+                  None if mu0 is None else np.array(mu0, dtype=float), info.get("meta", {}))
+    if cfg is not None:
+        check_recording(sc, cfg, path, cols, line_of, "dt" in info)
+    return sc
+
+
+def check_recording(sc: Scenario, cfg: Any, path: str | Path, cols: dict[str, Array],
+                    line_of: list[int], dt_given: bool) -> None:
+    """A recording against the config it is filtered with (gpf.limits): its app, its step,
+    every input and measurement within the format it is quantised to, every truth quaternion
+    and the initial estimate's of unit norm, the initial estimate with bot.x0's headroom.
+    One ConfigError line naming the row (k), its line and the column."""
+    from gpf.limits import initial_state_problem, input_limits, quaternion_problem
+
+    if sc.app != cfg.app:
+        raise ConfigError(f"{path}: a {sc.app} recording (its columns), config {cfg.name!r} is "
+                          f"{cfg.app}: give a {cfg.app} scenario")
+    if abs(sc.dt - cfg.dt) > 1e-9 * max(1.0, cfg.dt):
+        where = "metadata dt" if dt_given else "column 't' (its step)"
+        raise ConfigError(f"{path}: {where} = {sc.dt!r}, config filter.dt = {cfg.dt!r}: the "
+                          "filter propagates with filter.dt; record at that step")
+    for c, (lo, hi, what) in input_limits(cfg).items():
+        values = cols[c]
+        bad = np.flatnonzero(~((values >= lo) & (values <= hi)) & ~np.isnan(values))
+        if len(bad):
+            r = int(bad[0])
+            raise ConfigError(f"{path}: row {r} (line {line_of[r]}), column '{c}': "
+                              f"{float(values[r])!r} is outside [{lo:g}, {hi:g}], {what}")
+    if sc.app == "uav":
+        for r, q in enumerate(sc.truth[:, :4]):
+            if np.all(np.isfinite(q)):
+                bad = quaternion_problem(q)
+                if bad:
+                    raise ConfigError(f"{path}: row {r} (line {line_of[r]}), columns q0..q3: "
+                                      f"{bad}")
+    columns = None
+    if sc.mu0 is not None:
+        mu, name = sc.mu0, "metadata mu0"
+    elif sc.app == "bot":
+        return      # the config's x0, checked with the config
+    elif np.all(np.isfinite(sc.truth[0])):
+        mu, name = sc.truth[0], f"row 0 (line {line_of[0]}, the initial estimate)"
+        columns = TRUTH[sc.app]
+    else:
+        raise ConfigError(f"{path}: no initial estimate: give metadata mu0 or the whole truth "
+                          f"of row 0 (line {line_of[0]})")
+    bad = initial_state_problem(cfg, [float(v) for v in mu], name, columns)
+    if bad:
+        raise ConfigError(f"{path}: {bad}")
 
 
 def _read_meta(path: Path, ln: int, text: str, info: dict[str, Any]) -> None:
@@ -275,7 +337,7 @@ def _read_meta(path: Path, ln: int, text: str, info: dict[str, Any]) -> None:
           "mu0": lambda v: isinstance(v, list) and all(
               isinstance(x, int | float) and math.isfinite(x) for x in v)}[key]
     if val is None or isinstance(val, bool) or not ok(val):
-        raise ValueError(f"{path}: line {ln}: metadata {key} = {value.strip()!r} is not valid")
+        raise ConfigError(f"{path}: line {ln}: metadata {key} = {value.strip()!r} is not valid")
     info[key] = val
 
 
@@ -291,8 +353,8 @@ def _read_header(path: Path, ln: int, text: str) -> str:
               if got != want), min(len(header), len(names)))
     got = repr(header[j]) if j < len(header) else "missing"
     want = repr(names[j]) if j < len(names) else "no more columns"
-    raise ValueError(f"{path}: line {ln} (header), column {j + 1}: {got}, expected {want} "
-                     f"({app} columns: {','.join(names)})")
+    raise ConfigError(f"{path}: line {ln} (header), column {j + 1}: {got}, expected {want} "
+                      f"({app} columns: {','.join(names)})")
 
 
 # ---- fault scenarios: situations the filter must flag and survive (README, "Faults") -------
@@ -339,6 +401,7 @@ def uav_gps_glitch(cfg: Any, steps: int, seed: int) -> Scenario:
 def bot_far_target(cfg: Any, steps: int, seed: int) -> Scenario:
     """A target 6 m inside the edge of the position format, moving out at 3 m/s: positions
     saturate (flag SAT) from about step 2 on, and the filter keeps running."""
+    _for_app(cfg, "bot", "bot_far_target")
     edge = float(cfg.formats["state"].max_real)
     x0 = np.array(cfg.app_params["x0"], dtype=float)
     x0[0], x0[1] = edge - 6.0, 3.0
