@@ -210,6 +210,10 @@ def cases(draw: st.DrawFn) -> Case:
 @example(case=Case("uav", scenario="bot_fixed_observer"))
 @example(case=Case("uav", config={"uav.sigma_a": 1e30}, expect="sigma_a"))   # absurd noise
 @example(case=Case("bot", config={"bot.process_var": 1e30}, expect="process_var"))
+@example(case=Case("bot", config={"bot.process_var": 1e300}, expect="process_var"))  # 2^481
+@example(case=Case("bot", config={"bot.bearing_var": 1e-12}, expect="bearing_var"))
+@example(case=Case("bot", config={"filter.lanes": 64}, expect="lanes"))
+@example(case=Case("bot", args=["--particles", "4096"], expect="--particles"))
 def test_model_run_bad_inputs(tmp_path_factory: pytest.TempPathFactory,
                               capsys: pytest.CaptureFixture[str], case: Case) -> None:
     check_command(case, tmp_path_factory.mktemp("fuzz"), capsys)
