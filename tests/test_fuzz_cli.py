@@ -58,12 +58,21 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int | 
     return status, capsys.readouterr().err
 
 
-def assert_one_line(status: int | None, err: str, *words: str) -> None:
+def assert_one_line(status: int | None, err: str, *words: str) -> str:
+    """Exit 2 and one line from gpf holding every word; returns the line."""
     assert status == 2, (status, err)
     lines = err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("gpf"), err
     for word in words:
         assert word in lines[0], (word, err)
+    return lines[0]
+
+
+def assert_refused(status: int | None, err: str, *words: str) -> str:
+    """As assert_one_line, the line a user error's: `gpf: error: ...`."""
+    line = assert_one_line(status, err, *words)
+    assert line.startswith("gpf: error: "), err
+    return line
 
 
 # ---- a TOML writer for generated documents (tomllib only reads) ----

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_fuzz_cli import StartedError
+from test_fuzz_cli import assert_refused as one_line
 
 from gpf import cli, outputs
 from gpf.config import load_config
@@ -25,10 +27,6 @@ from gpf.model.scenarios import bot_fixed_observer, write_csv
 REPO = Path(__file__).resolve().parent.parent
 BOT = REPO / "configs" / "bot.toml"
 TINY = ["--particles", "64", "--runs", "1"]
-
-
-class StartedError(BaseException):   # not an internal error: main() lets it through
-    """The command got past its checks."""
 
 
 def _started(*args: Any, **kwargs: Any) -> None:
@@ -57,12 +55,6 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int | 
     return status, got.out, got.err
 
 
-def one_line(status: int | None, err: str, *words: str) -> None:
-    assert status == 2, (status, err)
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("gpf: error: "), err
-    for word in words:
-        assert word in lines[0], (word, err)
 
 
 def scenario_csv(path: Path, truth: str = "all") -> Path:

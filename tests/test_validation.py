@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_fuzz_cli import _started, run_cli
+from test_fuzz_cli import assert_refused as refused
 
 from gpf import cli
 from gpf.config import ConfigError, limits_table, load_config
@@ -25,15 +27,6 @@ from gpf.model.scenarios import TRUTH, bot_fixed_observer, read_csv, uav_flight,
 from gpf.study.montecarlo import SCENARIOS
 
 CONFIGS = ("bot", "odd", "uav", "uav_seed002")
-
-
-class StartedError(BaseException):
-    """The command got past its checks and would now do its work (not an Exception: gpf's
-    internal-error handler must let it through)."""
-
-
-def _started(*args: Any, **kwargs: Any) -> None:
-    raise StartedError
 
 
 @pytest.fixture
@@ -58,25 +51,6 @@ def stubbed(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
         monkeypatch.setattr(cli, name, lambda *a: None)
     monkeypatch.setattr(cli, "BUILD", tmp_path / "build")
 
-
-def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int | None, str]:
-    """(exit status, stderr); status None when the command started its work."""
-    capsys.readouterr()
-    try:
-        status = cli.main(argv)
-    except StartedError:
-        status = None
-    return status, capsys.readouterr().err
-
-
-def refused(status: int | None, err: str, *words: str) -> str:
-    """Exit 2 and one line `gpf: error: ...` holding every word; returns the line."""
-    assert status == 2, (status, err)
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("gpf: error: "), err
-    for word in words:
-        assert word in lines[0], (word, err)
-    return lines[0]
 
 
 def write_config(tmp_path: Path, app: str = "bot", **changes: Any) -> Path:
