@@ -12,7 +12,7 @@ Two kinds of limit:
 - per key (RULES): each bound follows from a format (its range 2^I, its LSB 2^-F) and what the
   models assume (an initial cloud of K_SIGMA sigma, the GRNG's reach |e| < 8, a unit
   quaternion); every command compares the value with `bounds()` of its rule;
-- derived constants (gpf.model.formats.datapath_problems): every constant the datapath computes
+- derived constants (datapath_problems): every constant the datapath computes
   from the keys is one 18-bit word with no negative fraction, and every exact sum of the model
   that takes one fits its 62-bit words. A refusal names the key whose change fixes it, with the
   range in which it does (found by bisection over the same check).
@@ -37,15 +37,84 @@ from gpf.config import (
     _show,
     load_config,
 )
+from gpf.model.blocks import MODEL_SUM_BITS
 from gpf.model.fixed import Format
 from gpf.model.formats import (
-    CONST_KEYS,
-    MODEL_SUM_BITS,
+    CONST_WIDTH,
     UAV_ACCEL_INT_BITS,
     UAV_GYRO_INT_BITS,
+    Datapath,
     datapath,
-    datapath_problems,
 )
+
+# The config keys each derived constant (and h, uav's rate step omega dt/2) is computed from,
+# the key a refusal names first: gpf.limits names the first of them whose change fixes it.
+CONST_KEYS = {
+    "bot": {"T": ("filter.dt",), "T2": ("filter.dt",),
+            "a": ("bot.process_var", "filter.dt"), "b": ("bot.process_var", "filter.dt"),
+            "q_pp": ("bot.process_var", "filter.dt"), "q_pv": ("bot.process_var", "filter.dt"),
+            "q_vv": ("bot.process_var", "filter.dt"), "c_u": ("bot.bearing_var",)},
+    "uav": {"dt": ("filter.dt",), "dt2": ("filter.dt",), "h": ("filter.dt",),
+            "s_w": ("uav.sigma_omega_deg",), "s_a": ("uav.sigma_a",),
+            "q_q": ("uav.sigma_omega_deg", "filter.dt"), "q_v": ("uav.sigma_a", "filter.dt"),
+            "c_u": ("uav.sigma_v",), "g0": (), "g1": (), "g2": ()},
+}
+def _sum_bits(terms: list[tuple[int, int]]) -> int:
+    """Signed bits of an exact sum of terms (signed width, fraction bits) at the largest
+    fraction, as blocks.round_sum forms it: the widest shifted term, a bit per doubling."""
+    top = max(f for _, f in terms)
+    return max(w + top - f for w, f in terms) + (len(terms) - 1).bit_length()
+
+
+def datapath_problems(dp: Datapath) -> list[tuple[tuple[str, ...], str]]:
+    """What of `dp`'s derived constants the models and the generator cannot represent, as
+    (the constants involved, a one-line reason); empty when all fit. Each constant must be
+    one 18-bit signed word with no negative fraction (|c| < 2^17: never a rescaled word); every
+    exact sum of the fixed-point model that takes one must fit MODEL_SUM_BITS (the sums of
+    blocks.propagate_bot and propagate_uav, mirrored here for operands anywhere in their
+    formats); the whitening product d c_u must keep a fraction bit below u's LSB to round
+    (the generator's weight block)."""
+    out: list[tuple[tuple[str, ...], str]] = []
+    c, w, ne = dp.consts, dp.word, dp.noise.width
+    fe, cw = dp.noise.frac_bits, CONST_WIDTH
+    for name, k in sorted(c.items()):
+        if k.frac < 0:
+            out.append(((name,), f"the constant {name} = {k.value:.4g} is not below "
+                                 f"2^{cw - 1} (one {cw}-bit word would need a scale of "
+                                 f"2^{-k.frac})"))
+
+    def fits(names: tuple[str, ...], what: str, terms: list[tuple[int, int]]) -> None:
+        bits = _sum_bits(terms)
+        if bits > MODEL_SUM_BITS:
+            at = ", ".join(f"{n} = {c[n].value:.4g}" if n in c else
+                           f"h = omega dt/2 at {dp.h_frac} fraction bits" for n in names)
+            out.append((names, f"{what} needs {bits}-bit exact sums ({at}); the model's sums "
+                               f"hold {MODEL_SUM_BITS}"))
+
+    if dp.app == "bot":
+        fx = dp.x[0].frac_bits
+        fits(("a", "T"), "propagate_bot's position sum",
+             [(w, fx), (w + cw, fx + c["T"].frac), (ne + cw, fe + c["a"].frac)])
+        fits(("b",), "propagate_bot's velocity sum", [(w, fx), (ne + cw, fe + c["b"].frac)])
+        d_frac = dp.angle_frac
+    else:
+        fg, fa, fq = dp.gyro.frac_bits, dp.accel.frac_bits, dp.x[0].frac_bits
+        fv = dp.x[4].frac_bits
+        fits(("s_w",), "propagate_uav's body-rate sum",
+             [(w, fg), (ne + cw, fe + c["s_w"].frac)])
+        fits(("s_a",), "propagate_uav's specific-force sum",
+             [(w, fa), (ne + cw, fe + c["s_a"].frac)])
+        fits(("h",), "propagate_uav's quaternion update",
+             [(w, fq)] + [(2 * w, dp.h_frac + fq)] * 3)
+        fits(("dt",), "propagate_uav's velocity sum", [(w, fv), (w + cw, fa + c["dt"].frac)])
+        d_frac = fv
+    prod_frac = d_frac + c["c_u"].frac
+    if prod_frac <= dp.u.frac_bits:
+        out.append((("c_u",), f"the whitening product d c_u (c_u = {c['c_u'].value:.4g}) has "
+                              f"{prod_frac} fraction bits; rounding it into u = {dp.u} needs "
+                              f"at least {dp.u.frac_bits + 1}"))
+    return out
+
 
 K_SIGMA = 4        # the initial cloud is checked at 4 sigma of sigma0_diag
 QUAT_TOL = 1e-3    # a unit quaternion: | |q| - 1 | <= QUAT_TOL
@@ -379,7 +448,7 @@ def check_config(cfg: Config, prefix: str = "", detail: bool = True) -> None:
 
 def check_datapath(cfg: Config, word: int | None = None, prefix: str = "",
                    detail: bool = True) -> None:
-    """The derived constants (gpf.model.formats.datapath_problems) of cfg, or of its datapath
+    """The derived constants (datapath_problems) of cfg, or of its datapath
     resized to `word` bits (the word-length study); a problem names the key whose change fixes
     it and the range in which it does."""
     try:

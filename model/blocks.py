@@ -26,6 +26,11 @@ from gpf.model.formats import (
 )
 from gpf.model.primitives import div_round, sqrt_round
 
+# round_sum and the products below form exact sums in int64: each is declared a signed
+# 62-bit word to shift_round, whatever the operands within their formats (gpf.limits checks
+# that a config's constants keep them so)
+MODEL_SUM_BITS = 62
+
 
 class Flag(IntFlag):
     SAT = 1            # a datapath value saturated
@@ -57,7 +62,7 @@ def round_sum(terms: list[tuple[np.ndarray | int, int]], out: Format
     Flag.SAT marks per element."""
     frac = max(f for _, f in terms)
     total = sum(np.asarray(raw, dtype=np.int64) << (frac - f) for raw, f in terms)
-    rounded = shift_round(total, frac - out.frac_bits, "half_up", width=62)
+    rounded = shift_round(total, frac - out.frac_bits, "half_up", width=MODEL_SUM_BITS)
     raw, flag = saturate(rounded, out)
     return raw, _marks(flag, Flag.SAT)
 
@@ -149,7 +154,8 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
     for k in range(3):
         wk, f1 = round_sum([(omega[..., k], fg), cmul(e[:, k], fe, c["s_w"])], dp.gyro)
         prod, frac = cmul(wk, fg, c["dt2"])
-        hk, f2 = _sat_word(shift_round(prod, frac - dp.h_frac, "half_up", width=62), dp.word)
+        hk, f2 = _sat_word(shift_round(prod, frac - dp.h_frac, "half_up",
+                                       width=MODEL_SUM_BITS), dp.word)
         h.append(hk)
         flags |= f1 | f2
     a = []
@@ -182,7 +188,7 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
 def exponent_from_u(dp: Datapath, u_terms: list[np.ndarray]) -> np.ndarray:
     """t = sum u_k^2, saturated at its maximum (beyond the exponent's reach: no flag)."""
     total = sum(np.asarray(u, dtype=np.int64) ** 2 for u in u_terms)
-    t = shift_round(total, 2 * dp.u.frac_bits - dp.t.frac_bits, "half_up", width=62)
+    t = shift_round(total, 2 * dp.u.frac_bits - dp.t.frac_bits, "half_up", width=MODEL_SUM_BITS)
     return np.minimum(t, dp.t.max_raw)
 
 
@@ -190,7 +196,7 @@ def whiten(dp: Datapath, d: np.ndarray, d_frac: int) -> np.ndarray:
     """u = d * c_u in the u format, saturated (|u| >= 32 is beyond the exponent's reach: no
     flag)."""
     prod, frac = cmul(d, d_frac, dp.consts["c_u"])
-    u = shift_round(prod, frac - dp.u.frac_bits, "half_up", width=62)
+    u = shift_round(prod, frac - dp.u.frac_bits, "half_up", width=MODEL_SUM_BITS)
     return np.clip(u, dp.u.min_raw, dp.u.max_raw)
 
 
@@ -398,7 +404,7 @@ def accumulate(dp: Datapath, x: np.ndarray, w: np.ndarray, shift: np.ndarray,
     values[..., 0] = w
     wdx = values[..., 1:1 + n]
     np.multiply(w[..., None], dx, out=wdx)            # exact: weight x state bits
-    p = shift_round(wdx, dp.weight.frac_bits - guard, "half_up", width=62)  # |w| <= 1
+    p = shift_round(wdx, dp.weight.frac_bits - guard, "half_up", width=MODEL_SUM_BITS)  # |w| <= 1
     for q, (i, j) in enumerate(pairs):
         np.multiply(p[..., i], dx[..., j], out=values[..., 1 + n + q])
     np.multiply(w, w, out=values[..., -1])

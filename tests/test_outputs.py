@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_fuzz_cli import StartedError
+from test_fuzz_cli import StartedError, _started
 from test_fuzz_cli import assert_refused as one_line
 
 from gpf import cli, outputs
@@ -27,10 +27,6 @@ from gpf.model.scenarios import bot_fixed_observer, write_csv
 REPO = Path(__file__).resolve().parent.parent
 BOT = REPO / "configs" / "bot.toml"
 TINY = ["--particles", "64", "--runs", "1"]
-
-
-def _started(*args: Any, **kwargs: Any) -> None:
-    raise StartedError
 
 
 def md5(path: Path) -> str:

@@ -20,9 +20,10 @@ from test_fuzz_cli import assert_refused as refused
 
 from gpf import cli
 from gpf.config import ConfigError, limits_table, load_config
-from gpf.limits import RULES, accepted_range, check_config
+from gpf.limits import RULES, accepted_range, check_config, datapath_problems
 from gpf.model import blocks
-from gpf.model.formats import MODEL_SUM_BITS, datapath, datapath_problems
+from gpf.model.blocks import MODEL_SUM_BITS
+from gpf.model.formats import datapath
 from gpf.model.scenarios import TRUTH, bot_fixed_observer, read_csv, uav_flight, write_csv
 from gpf.study.montecarlo import SCENARIOS
 
