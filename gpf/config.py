@@ -314,6 +314,49 @@ def config_from_dict(doc: dict[str, Any], name: str = "config", source: str = ""
     return cfg
 
 
+# The shipped configs, found from the package (an editable install, `make venv`), so a bare name
+# works from any folder; a path is read relative to the folder gpf runs in.
+CONFIGS_DIR = Path(__file__).resolve().parent.parent / "configs"
+
+
+def shipped_configs() -> list[str]:
+    return sorted(p.stem for p in CONFIGS_DIR.glob("*.toml"))
+
+
+def config_path(name: str | Path) -> Path:
+    """`bot` -> the shipped configs/bot.toml; a path (a `.toml` or with a folder) as it is, and
+    a bare `bot.toml` that is no file here falls back to the shipped one of that name."""
+    path = Path(name)
+    if len(path.parts) == 1 and path.suffix != ".toml":
+        shipped = CONFIGS_DIR / f"{path.name}.toml"
+        if not shipped.is_file():
+            raise ConfigError(f"{_name(str(name))}: no such config: the shipped ones are "
+                              f"{', '.join(shipped_configs())}; or give a path to a .toml file")
+        return shipped
+    if len(path.parts) == 1 and not path.exists() and (CONFIGS_DIR / path.name).is_file():
+        return CONFIGS_DIR / path.name
+    return path
+
+
+def regenerate_command(cfg: Config) -> str:
+    """The command that writes this config's RTL again, from any folder."""
+    source = Path(cfg.source) if cfg.source else None
+    if source is None or source.resolve().parent == CONFIGS_DIR:
+        arg = source.stem if source is not None else cfg.name
+    else:
+        arg = str(source)
+    sets = "".join(f" --set {k}={_toml_value(v)}" for k, v in cfg.overrides.items())
+    return f"gpf generate --config {arg}{sets}"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return value if value.replace("_", "").isalnum() else repr(value)
+    return str(value)
+
+
 def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
     """Load and validate a TOML config. `overrides` maps 'section.key' to a value."""
     path = Path(path)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 from gpf.config import (
@@ -35,6 +34,7 @@ from gpf.config import (
     Config,
     ConfigError,
     _show,
+    config_path,
     load_config,
 )
 from gpf.model.blocks import MODEL_SUM_BITS
@@ -571,7 +571,7 @@ RECORDING_LIMITS = [
 
 
 def _shipped(name: str) -> Config:
-    return load_config(Path("configs") / f"{name}.toml")
+    return load_config(config_path(name))
 
 
 def _with_element(cfg: Config, key: str, i: int | None, v: float) -> Config:

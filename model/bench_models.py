@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from gpf.config import load_config
+from gpf.config import config_path, load_config
 from gpf.model.fixed_gpf import FixedGPF
 from gpf.model.float_gpf import FloatGPF
 from gpf.model.grng import GrngModel, GrngStream
@@ -62,7 +62,7 @@ def main() -> None:
     print("| model | app | runs at once | N | steps | particle-steps/s |")
     print("|---|---|---|---|---|---|")
     for name, make in (("bot", bot_fixed_observer), ("uav", uav_flight)):
-        cfg = load_config(f"configs/{name}.toml")
+        cfg = load_config(config_path(name))
         gpf = FixedGPF(cfg, particles=n)
         scs = [make(cfg, steps, 1 + r) for r in range(runs)]
         grng = GrngModel(cfg, lanes=gpf.dp.draws() * cfg.lanes)
@@ -86,7 +86,7 @@ def main() -> None:
               f"{4 * n * steps / t_one:,.0f} |")
         print(f"| float64, draws given | {name} | 1 | {n} | {steps} | "
               f"{4 * n * steps / t_float:,.0f} |")
-    grng = GrngModel(load_config("configs/bot.toml"), lanes=6)
+    grng = GrngModel(load_config(config_path("bot")), lanes=6)
     stream = GrngStream(grng, list(range(runs)))
     stream.next(1 << 10)
     samples = 6 * runs * 20_000

@@ -19,10 +19,9 @@ from pathlib import Path
 import numpy as np
 from scipy import special, stats
 
-from gpf.config import load_config
+from gpf.config import config_path, load_config
 from gpf.model.grng import COMPONENTS, LFSR258, GrngModel
 
-ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIGS = ("bot", "odd")
 SIGN = np.uint64(1 << 63)
 LAGS = range(1, 9)
@@ -76,8 +75,7 @@ def cross_correlation(a: np.ndarray, b: np.ndarray, lags: range) -> float:
 
 
 def measure(name: str, samples: int, seed: int | None) -> dict[str, str]:
-    path = Path(name) if name.endswith(".toml") else ROOT / "configs" / f"{name}.toml"
-    cfg = load_config(path, {"filter.lanes": 2})
+    cfg = load_config(config_path(name), {"filter.lanes": 2})
     model = GrngModel(cfg)
     seg, fmt = model.seg, model.out
     widths = model.coef_widths
@@ -100,7 +98,7 @@ def measure(name: str, samples: int, seed: int | None) -> dict[str, str]:
     scale = 1 / math.sqrt(samples)
 
     return {
-        "Config": f"`{path.name}`",
+        "Config": f"`{Path(cfg.source).name}`",
         "Output format": f"{fmt} (LSB 2^-{fmt.frac_bits})",
         "LUT: octaves x segments = words": (f"{seg.octaves} x {1 << seg.segment_bits} = "
                                             f"{seg.depth}"),

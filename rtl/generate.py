@@ -16,7 +16,7 @@ from typing import Any
 
 import jinja2
 
-from gpf.config import Config
+from gpf.config import Config, regenerate_command
 from gpf.model import grng as grng_model
 from gpf.model.blocks import (
     _OMEGA_Q,
@@ -1199,6 +1199,7 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     names = _with_uses(modules_for(cfg) if modules is None else modules)
     env = _environment(template_dir)
     config_file = Path(cfg.source).name if cfg.source else f"{cfg.name}.toml"
+    regenerate = regenerate_command(cfg)
     texts: dict[str, str] = {}
     files: dict[str, list[Path]] = {}
     manifest: dict[str, Any] = {
@@ -1214,7 +1215,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     for name in names:
         module = MODULES[name]
         context = module.context(cfg)
-        made = module.made(env, {**context, "config_file": config_file}) if module.made else {}
+        made = (module.made(env, {**context, "config_file": config_file,
+                                  "regenerate": regenerate}) if module.made else {})
         texts |= made
         for part in module.parts:
             if f"{part}.sv" in made:
@@ -1222,7 +1224,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
             # a part may have its own context (the filter's GRNG: more lanes than the block's)
             part_context = context.get("part_contexts", {}).get(part, context)
             texts[f"{part}.sv"] = env.get_template(f"{module.template(part)}.sv.j2").render(
-                module=part, config_file=config_file, config_name=cfg.name, **part_context)
+                module=part, config_file=config_file, config_name=cfg.name,
+                regenerate=regenerate, **part_context)
         files[name] = [out_dir / f"{part}.sv" for part in module.files()]
         texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.files())
         manifest["modules"][name] = {

@@ -359,7 +359,7 @@ def test_config_paths_that_are_not_files(tmp_path: Path,
     (tmp_path / "top.toml").write_text("app = 'bot'\n")
     for config, words in ((str(tmp_path), "cannot read config: Is a directory"),
                           (str(tmp_path / "nosuch.toml"), "No such file"),
-                          ("nosuch", "configs/nosuch.toml: cannot read config"),
+                          ("nosuch", "nosuch: no such config: the shipped ones are bot,"),
                           (str(tmp_path / "empty.toml"), "missing section [filter]"),
                           (str(tmp_path / "latin1.toml"), "not a UTF-8 text file (byte 0xf6"),
                           (str(tmp_path / "top.toml"), "app = 'bot': a key outside any "
