@@ -195,7 +195,9 @@ def _scenario_arg(text: str | None, cfg=None):
     try:
         return read_csv(text, cfg)
     except (OSError, ValueError) as exc:
-        raise UsageError(f"--scenario {text}: {exc}") from None
+        message = str(exc)   # the reader's messages start with the file's name
+        raise UsageError(f"--scenario {message}" if message.startswith(f"{text}: ")
+                         else f"--scenario {text}: {message}") from None
 
 
 def _positive(name: str, value: int | None) -> None:
@@ -231,53 +233,66 @@ def cmd_model_run(args: argparse.Namespace) -> int:
     _no_clash([*([("--json", out)] if out else []),
                *(("--plot", p) for p in (plot_files(args.plot, stem) if args.plot else []))],
               _inputs(cfg, args.scenario))
+    scenario = _scenario_arg(args.scenario, cfg)
     try:
+        if csv and args.steps is not None:    # a recording filtered in part: its first steps
+            scenario = scenario.first(args.steps, args.scenario)
         mc = monte_carlo(cfg, runs=args.runs, steps=args.steps, particles=args.particles,
-                         seed=args.seed, word=args.word,
-                         scenario=_scenario_arg(args.scenario, cfg))
+                         seed=args.seed, word=args.word, scenario=scenario)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     summary = mc.summary()
+    label = Path(args.scenario).name if csv else mc.scenario
     if args.plot:
         first = {k: np.asarray(summary["per_step"][k], dtype=float) for k in ("float", "fixed")}
         est = {"truth": mc.truth[0], **first}
+        runs = "1 run" if mc.runs == 1 else f"run 1 of {mc.runs}"
         summary["plots"] = plot_run(
-            cfg.app, est, cfg.dt, f"{cfg.name} {mc.scenario}, N = {mc.particles}, first of "
-            f"{mc.runs} runs", args.plot, stem, mc.observer)
+            cfg.app, est, cfg.dt, f"gpf model run: {cfg.name}, {label}, N = {mc.particles}, "
+            f"{runs}, seed {mc.seed}", args.plot, stem, mc.observer)
     if out:
         write_json(out, summary)   # strict: a value that could not be computed is null
-    for line in model_run_lines(cfg.name, mc, summary):
+    for line in model_run_lines(cfg.name, mc, summary, label):
         print(line)
     if out:
         print(f"  -> {out}")
     return 0
 
 
-def model_run_lines(name: str, mc, summary: dict) -> list[str]:
-    """`gpf model run`'s report: every metric (all steps, last 20 %), lost tracks, flags."""
+def model_run_lines(name: str, mc, summary: dict, scenario: str | None = None) -> list[str]:
+    """`gpf model run`'s report: every metric (all steps, last 20 %), lost tracks, flags.
+    Without truth (a recording) no error line: it says so once. One run has no spread."""
     from gpf.outputs import fmt
 
-    lines = [f"{name} {mc.scenario}: {mc.runs} runs x {mc.steps} steps, N = {mc.particles}"
-             + (f", word {mc.word}" if mc.word else "")]
+    lines = [f"{name} {scenario or mc.scenario}: {mc.runs} run{'' if mc.runs == 1 else 's'} x "
+             f"{mc.steps} steps, N = {mc.particles}" + (f", word {mc.word}" if mc.word else "")]
     for metric, m in summary["metrics"].items():
         for window in ("all", "last20"):
             w = m[window]
+            spread = " (1 run: spread n/a)" if mc.runs == 1 else \
+                f" +- {fmt(w['ratio_std_error'], '.4f')}"
             lines.append(f"  {metric:8s} {'all steps' if window == 'all' else 'last 20 %':9s} "
                          f"RMSE ({m['unit']}): float {fmt(w['float'], '.5g')}, fixed "
-                         f"{fmt(w['fixed'], '.5g')}, ratio {fmt(w['ratio'], '.4f')} +- "
-                         f"{fmt(w['ratio_std_error'], '.4f')} (float, numpy's draws: "
-                         f"{fmt(w['float_numpy'], '.5g')})")
+                         f"{fmt(w['fixed'], '.5g')}, ratio {fmt(w['ratio'], '.4f')}{spread}; "
+                         f"float on numpy's draws {fmt(w['float_numpy'], '.5g')}")
     if summary.get("lost_tracks") is not None:
         lines.append(f"  lost tracks (last 20 % > {summary['lost_factor']:g} x float64): "
                      f"{summary['lost_tracks']} of {mc.runs}"
                      + (f" (runs {summary['lost_runs']})" if summary["lost_runs"] else ""))
     else:
-        lines.append("  no truth in the scenario: RMSE n/a, ratio n/a, lost tracks n/a (only "
-                     "the estimates)")
-    flags = {k: v for k, v in summary["flag_steps"].items() if v}
-    lines.append(f"  flagged steps, fixed point: {flags or 'none'}; float64: "
-                 f"{ {k: v for k, v in summary['float_flag_steps'].items() if v} or 'none'}; "
-                 f"mean ESS fixed {fmt(summary['ess_mean']['fixed'], '.1f')}, float "
+        lines.append("  no truth in the recording: errors not computed (RMSE n/a, ratio n/a, "
+                     "lost tracks n/a)")
+    q = summary.get("quantisation_max")
+    if q is not None:
+        lines.append(f"  fixed point vs float64 (same draws), {summary['primary_metric']} per "
+                     f"step: max {fmt(q, '.3g')} {summary['rmse_unit']}")
+
+    def counts(flags: dict[str, int]) -> str:
+        return ", ".join(f"{k} {v}" for k, v in flags.items() if v) or "none"
+
+    lines.append(f"  flagged steps, fixed point: {counts(summary['flag_steps'])}; float64: "
+                 f"{counts(summary['float_flag_steps'])}; mean ESS fixed "
+                 f"{fmt(summary['ess_mean']['fixed'], '.1f')}, float "
                  f"{fmt(summary['ess_mean']['float'], '.1f')}")
     return lines
 
@@ -442,8 +457,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UsageError(f"--scenario {scenario}: a {sc.app} scenario, config "
                              f"{cfg.name!r} is {cfg.app}")
         steps = sc.steps if args.steps is None else args.steps
-        if steps != sc.steps:
-            raise UsageError(f"--steps {steps}: the scenario file has {sc.steps} steps")
+        try:
+            sc.first(steps, scenario)    # fewer: its first steps (run_filter); more: refused
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     if args.ip and (args.gate or args.sim != "verilator"):
         raise UsageError("--ip: the IP block runs on Verilator, as RTL (not with --gate or "
                          "--sim icarus)")

@@ -508,7 +508,7 @@ def input_limits(cfg: Config) -> dict[str, tuple[float, float, str]]:
 
 
 def quaternion_problem(q: Sequence[float]) -> str | None:
-    norm = math.sqrt(sum(float(v) ** 2 for v in q))
+    norm = math.hypot(*(float(v) for v in q))   # no overflow on a 1e300 component
     if abs(norm - 1) <= QUAT_TOL:
         return None
     return (f"[{', '.join(f'{float(v):g}' for v in q)}] has norm {norm:.6g}; a quaternion must "

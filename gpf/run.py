@@ -42,10 +42,11 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     out, progress_file = work / "run.json", work / "progress"
     for stale in (out, progress_file):
         stale.unlink(missing_ok=True)
+    scenario = args.scenario
+    if scenario and scenario.endswith(".csv"):
+        scenario = str(_recording(Path(scenario), args.steps, work))
     spec = {"steps": args.steps, "particles": args.particles, "seed": args.seed,
-            "scenario": str(Path(args.scenario).resolve()) if args.scenario and
-            args.scenario.endswith(".csv") else args.scenario,
-            "out": str(out), "progress": str(progress_file)}
+            "scenario": scenario, "out": str(out), "progress": str(progress_file)}
     log = build_root / cfg.name / f"{module}-{args.sim}{'-gate' if args.gate else ''}.log"
     result: dict[str, Any] = {}
 
@@ -74,11 +75,30 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                            f"failed): see {log}")
     res = json.loads(out.read_text())
     wall = time.monotonic() - start
-    res.update(sim=sim_label(args),
+    from gpf.study.metrics import PRIMARY, metric
+
+    primary = metric(cfg.app, PRIMARY[cfg.app])
+    res.update(sim=sim_label(args), app=cfg.app, primary_metric=primary.name,
+               rmse_unit=primary.unit,
                total_seconds=round(wall, 2), passed=sim.passed, log=str(log),
                particles_per_second=round(res["particles_checked"] / res["wall_seconds"], 1),
                waves=str(sim.waves) if sim.waves else None)
     return res
+
+
+def _recording(path: Path, steps: int, work: Path) -> Path:
+    """The CSV the testbench reads (it filters a whole file): the recording itself, or, for
+    fewer steps than it has, its first `steps` in a file of the same name in the run's build
+    folder (exact: write_csv keeps every float's shortest repr and the metadata)."""
+    from gpf.model.scenarios import read_csv, write_csv
+
+    sc = read_csv(path)
+    if steps >= sc.steps:
+        return path.resolve()
+    part = work / "recording" / path.name
+    part.parent.mkdir(parents=True, exist_ok=True)
+    write_csv(sc.first(steps), part)
+    return part.resolve()
 
 
 def sim_label(args: RunArgs) -> str:
@@ -138,10 +158,15 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
         lines.append(f"  {name} RMSE ({m['unit']}), all / last 20 %: " + ", ".join(
             f"{k} {fmt(m['all'][k])} / {fmt(m['last20'][k])}" for k in ("rtl", "fixed", "float")))
     quantisation = _known(res["quantisation_error"])
+    unit = f" {res['rmse_unit']}" if res.get("rmse_unit") and quantisation else ""
+    versus = (f"rtl vs float64 (same draws), {res.get('primary_metric', 'error')} per step: "
+              f"max {fmt(max(quantisation, default=None), '.3g')}{unit}")
     if res["metrics"]:
         lines.append(f"  lost track (last 20 % > 3 x float64): "
-                     f"{'YES' if res['lost_track'] else 'no'}; rtl vs float64 (same draws) per "
-                     f"step: max {fmt(max(quantisation, default=None), '.3g')}")
+                     f"{'YES' if res['lost_track'] else 'no'}; {versus}")
+    else:
+        lines += ["  no truth in the recording: errors not computed (RMSE n/a, lost track n/a)",
+                  f"  {versus}"]
     ess = _known(res["ess"])
     flagged = {f: sum(f in flags for flags in res["flags"]) for f in
                ("sat", "zero_weights", "not_pd", "low_ess")}
@@ -174,7 +199,8 @@ def plot(res: dict[str, Any], cfg: Config, directory: Path) -> list[str]:
     est = {k: np.array([[np.nan] * len(res["estimates"]["float"][0]) if r is None else r
                         for r in v]) for k, v in res["estimates"].items() if k != "observer"}
     observer = res["estimates"].get("observer")
-    title = f"{res['config']} on {res['sim']}, N = {res['particles']}, {res['steps']} steps"
+    title = (f"gpf run: {res['config']} on {res['sim']}, {res['scenario']}, N = "
+             f"{res['particles']}, {res['steps']} steps, seed {res['seed']}")
     return plot_run(cfg.app, {k: est[k] for k in ("truth", "float", "fixed", "rtl")}, cfg.dt,
                     title, directory, f"{res['config']}_{res['sim']}",
                     None if observer is None else np.array(observer))

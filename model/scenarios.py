@@ -76,6 +76,20 @@ class Scenario:
     def steps(self) -> int:
         return len(self.t) - 1
 
+    def first(self, steps: int, name: str = "the recording") -> Scenario:
+        """The scenario's first `steps` steps (rows k = 0..steps): a recording filtered in part.
+        More steps than it has: a ValueError naming both (and the file, as `name`)."""
+        if not 1 <= steps <= self.steps:
+            raise ValueError(f"--steps {steps}: {name} has {self.steps} steps (k = 1.."
+                             f"{self.steps}); give --steps 1 to {self.steps}, or leave it out "
+                             "to filter them all")
+        rows = slice(0, steps + 1)
+        return Scenario(self.app, self.dt, self.t[rows].copy(),
+                        {k: a[rows].copy() for k, a in self.inputs.items()},
+                        {k: a[rows].copy() for k, a in self.measurements.items()},
+                        self.truth[rows].copy(), None if self.mu0 is None else self.mu0.copy(),
+                        dict(self.meta))
+
     def step_inputs(self, k: int) -> dict[str, Any]:
         """What filter step k (1..steps) consumes, as FloatGPF.step takes it."""
         out = {name: a[k] for name, a in self.inputs.items()}
@@ -255,12 +269,18 @@ def read_csv(path: str | Path, cfg: Any = None) -> Scenario:
     cols = dict(zip(names, np.array(rows).T, strict=True))
     t = cols["t"]
     dt = float(info.get("dt", t[1] - t[0]))
-    off = np.abs(t - (t[0] + np.arange(len(t)) * dt))
-    bad = np.flatnonzero(off > 1e-9 * np.maximum(1, np.abs(t)))
-    if not dt > 0 or len(bad):
-        r = int(bad[0]) if len(bad) else 1
-        raise ConfigError(f"{path}: row {r} (line {line_of[r]}), column 't': {t[r]!r} is not "
-                          f"t_0 + k dt with dt = {dt!r} > 0")
+    source = "the metadata" if "dt" in info else "rows 0 and 1"
+    if not dt > 0:
+        raise ConfigError(f"{path}: row 1 (line {line_of[1]}), column 't': {_num(t[1])} after "
+                          f"t_0 = {_num(t[0])}: the step dt = {_num(dt)} (from {source}) "
+                          "must be > 0")
+    expected = t[0] + np.arange(len(t)) * dt
+    bad = np.flatnonzero(np.abs(t - expected) > 1e-9 * np.maximum(1, np.abs(t)))
+    if len(bad):
+        r = int(bad[0])
+        raise ConfigError(f"{path}: row {r} (line {line_of[r]}), column 't': {_num(t[r])}, "
+                          f"expected t_0 + k dt = {_num(expected[r])} (uniform steps, dt = "
+                          f"{_num(dt)} s from {source})")
     mu0 = info.get("mu0")
     if mu0 is not None and len(mu0) != len(TRUTH[app]):
         raise ConfigError(f"{path}: metadata mu0 has {len(mu0)} numbers, {app} needs "
@@ -277,6 +297,12 @@ def read_csv(path: str | Path, cfg: Any = None) -> Scenario:
     return sc
 
 
+def _num(x: Any) -> str:
+    """A number for a message: the shortest repr of its float, never numpy's
+    `np.float64(2.5)`."""
+    return repr(float(x))
+
+
 def check_recording(sc: Scenario, cfg: Any, path: str | Path, cols: dict[str, Array],
                     line_of: list[int], dt_given: bool) -> None:
     """A recording against the config it is filtered with (gpf.limits): its app, its step,
@@ -290,15 +316,16 @@ def check_recording(sc: Scenario, cfg: Any, path: str | Path, cols: dict[str, Ar
                           f"{cfg.app}: give a {cfg.app} scenario")
     if abs(sc.dt - cfg.dt) > 1e-9 * max(1.0, cfg.dt):
         where = "metadata dt" if dt_given else "column 't' (its step)"
-        raise ConfigError(f"{path}: {where} = {sc.dt!r}, config filter.dt = {cfg.dt!r}: the "
-                          "filter propagates with filter.dt; record at that step")
+        raise ConfigError(f"{path}: {where} = {_num(sc.dt)}, config filter.dt = "
+                          f"{_num(cfg.dt)}: the filter propagates with filter.dt; record at that "
+                          "step")
     for c, (lo, hi, what) in input_limits(cfg).items():
         values = cols[c]
         bad = np.flatnonzero(~((values >= lo) & (values <= hi)) & ~np.isnan(values))
         if len(bad):
             r = int(bad[0])
             raise ConfigError(f"{path}: row {r} (line {line_of[r]}), column '{c}': "
-                              f"{float(values[r])!r} is outside [{lo:g}, {hi:g}], {what}")
+                              f"{_num(values[r])} is outside [{lo:g}, {hi:g}], {what}")
     if sc.app == "uav":
         for r, q in enumerate(sc.truth[:, :4]):
             if np.all(np.isfinite(q)):

@@ -108,7 +108,8 @@ class RunReport:
 
     rmse: dict[str, float | None]   # the primary metric over steps 1..steps, per filter
     metrics: dict[str, dict]        # metric -> unit, and per window (all, last20) per filter
-    lost: bool                      # "rtl" (else "fixed") > LOST_FACTOR x "float", last 20 %
+    lost: bool | None               # "rtl" (else "fixed") > LOST_FACTOR x "float", last 20 %;
+                                    # None without truth (unknown)
     quantisation: list[float]       # primary error of the first filter against "float"
 
 
@@ -119,7 +120,7 @@ def run_metrics(app: str, truth: Array, est: dict[str, Array]) -> RunReport:
     steps = len(truth) - 1
     quantisation = primary_error(app, est[names[0]], est["float"])[1:].tolist()
     if not np.all(np.isfinite(np.asarray(truth, float)[1:])):
-        return RunReport(dict.fromkeys(names), {}, False, quantisation)
+        return RunReport(dict.fromkeys(names), {}, None, quantisation)
     windows = {"all": slice(1, None), "last20": last_window(steps)}
     table: dict[str, dict] = {}
     for m in METRICS[app]:

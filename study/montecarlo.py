@@ -110,6 +110,13 @@ class MonteCarlo:
                for which in ("fixed", "float")}
         return [int(r) for r in np.flatnonzero(lost_track(self.app, rms["fixed"], rms["float"]))]
 
+    def quantisation_max(self) -> float:
+        """The largest distance, in the primary metric, between the fixed-point and the float64
+        estimates on the same draws (every run, steps 1..steps): the quantisation error, known
+        with or without truth."""
+        m = metric(self.app, PRIMARY[self.app])
+        return float(np.max(m.error(self.est["fixed"][:, 1:], self.est["float"][:, 1:])))
+
     def flag_counts(self) -> dict[str, int]:
         """Steps (over all runs) that raised each flag, fixed point."""
         return {f.name.lower(): int(np.count_nonzero(self.flags[:, 1:] & f)) for f in Flag}
@@ -140,6 +147,7 @@ class MonteCarlo:
             "rmse_unit": primary.unit, "metrics": self.metric_table(),
             "flag_steps": self.flag_counts(), "float_flag_steps": self.float_flag_counts(),
             "ess_mean": {k: float(np.mean(v[:, 1:])) for k, v in self.ess.items()},
+            "quantisation_max": self.quantisation_max(),
         }
         if self.has_truth:
             ratio, noise = self.ratio_and_noise()
@@ -192,14 +200,16 @@ def _json_rows(a: np.ndarray) -> list:
 
 def resolve(cfg: Config, steps: int | None, scenario: str | scenarios.Scenario | None
             ) -> tuple[str, int]:
-    """The scenario's name (or "file") and the run length."""
+    """The scenario's name (or "file") and the run length: a recording's own, or its first
+    `steps` (more than it has: a ValueError)."""
     if isinstance(scenario, scenarios.Scenario):
-        if steps is not None and steps != scenario.steps:
-            raise ValueError(f"--steps {steps}: the scenario file has {scenario.steps} steps")
         if scenario.app != cfg.app:
             raise ValueError(f"scenario is for app {scenario.app!r}, config {cfg.name} is "
                              f"{cfg.app!r}")
-        return "file", scenario.steps
+        if steps is None:
+            return "file", scenario.steps
+        scenario.first(steps)      # refuses more steps than the recording has
+        return "file", steps
     name = scenario or DEFAULT_SCENARIO[cfg.app]
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r}: choose one of {', '.join(SCENARIOS)} "
@@ -215,6 +225,8 @@ def monte_carlo(cfg: Config, runs: int = 10, steps: int | None = None,
                 scenario: str | scenarios.Scenario | None = None,
                 progress: bool = True) -> MonteCarlo:
     name, steps = resolve(cfg, steps, scenario)
+    if isinstance(scenario, scenarios.Scenario) and steps < scenario.steps:
+        scenario = scenario.first(steps)     # a recording filtered in part: its first steps
     fixed = FixedGPF(cfg, particles=particles, word=word)
     flt = FloatGPF(cfg, fixed.particles)
     n, count = fixed.dp.n, fixed.particles
