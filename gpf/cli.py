@@ -488,7 +488,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     ok = exact and not res["lost_track"]
     why = "" if ok else " (the RTL differs from the model)" if not exact else \
         " (bit-exact, but the filter lost track)"
-    replay = _make_command("sim", args, cfg, STEPS=steps, PARTICLES=particles, SEED=args.seed)
+    steps_given = {"STEPS": args.steps} if args.steps is not None else {}   # else the config's
+    replay = _make_command("sim", args, cfg, **steps_given, PARTICLES=particles, SEED=args.seed)
     print(f"  SEED={args.seed} (replay: {replay})")
     print(f"  {f'-> {out}: ' if out else ''}{'PASSED' if ok else 'FAILED'}{why} "
           f"(log: {res['log']})")

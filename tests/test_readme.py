@@ -162,11 +162,12 @@ def readme_sim_output() -> list[str]:
 
 @pytest.mark.sim
 @pytest.mark.slow
+@pytest.mark.xdist_group("gpf-bot-lanes1-verilator")   # test_sim_filter's build of bot
 def test_readme_sim_output_is_what_gpf_run_prints(tmp_path: Path) -> None:
-    """From a folder outside the clone, with the make sim's options (--plot, --json)."""
-    run = subprocess.run([VENV_BIN / "gpf", "run", "--config", "bot", "--steps", "3",
-                          "--particles", "64", "--plot", "build/plots", "--json",
-                          "build/sim-bot.json"], cwd=tmp_path, text=True, capture_output=True)
+    """In the clone, with make sim's options (--plot, --json), fewer particles."""
+    run = subprocess.run([VENV_BIN / "gpf", "run", "--config", "bot", "--particles", "64",
+                          "--plot", tmp_path / "plots", "--json", tmp_path / "sim-bot.json"],
+                         cwd=REPO, text=True, capture_output=True)
     assert run.returncode == 0, run.stdout + run.stderr
     printed = run.stdout.splitlines()
     shown = readme_sim_output()
