@@ -484,6 +484,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(line)
     for path in res.get("plots", []):
         print(f"  plot: {path}")
+    if res.get("waves"):
+        hint = (f"gpf waves --config {args.config} --module gpf_{cfg.app}_axi" if args.ip
+                else _make_command("waves", args, cfg))
+        print(f"  waves:   {res['waves']} ({hint})")
     exact = res["passed"] and res["mismatches"] == 0
     ok = exact and not res["lost_track"]
     why = "" if ok else " (the RTL differs from the model)" if not exact else \

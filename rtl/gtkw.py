@@ -4,74 +4,57 @@
 shown as a decimal real: the raw integer divided by ``2**frac_bits`` (a s1.14 field holding raw
 16384 shows ``1``, raw 24576 shows ``1.5``, raw -8192 shows ``-0.5``).
 
-The save-file syntax is GTKWave's own, as written by ``write_save_helper()`` and read back by
-``parsewavline()`` in ``src/savefile.c`` (gtkwave/gtkwave; ``gtkwave3/src/savefile.c`` in the 3.3
-releases). Each line is one command:
+Libraries do the work: pyvcd's ``vcd.gtkw.GTKWSave`` writes the save file (groups, flags, aliases,
+translate filters, combined vectors, zoom and markers) and ``make_translation_filter`` the
+filter files; pywellen reads the dump's hierarchy (FST or VCD: each variable's name and width)
+and its value changes. What stays here is what neither has:
 
-``@<hex>``
-    Flags (``TR_*``, below) of every following trace, until the next ``@`` line.
-``[fpshift_count] <n>``
-    Fixed-point shift of every following trace (0..255), used where ``TR_FPDECSHIFT`` is set.
-``-<name>``
-    A blank (comment) trace; with ``TR_GRP_BEGIN`` / ``TR_GRP_END`` set it opens / closes the
-    group called ``<name>``.
-``top.sig[15:0]``
-    A whole signal, by its name in the dump. GTKWave names a vector ``scope.name[msb:lsb]`` after
-    its declared range, so this form cannot select part of a vector: ``top.sig[11:4]`` is not found
-    when ``top.sig`` is declared ``[15:0]`` (the line is dropped without a message).
-``#{name} (k)top.sig[15:0] ...``
-    A vector called ``name`` assembled from single bits; ``(k)parent`` is bit ``k`` of ``parent``
-    counted from its declared msb (``ExtractNodeSingleBit()`` in ``src/bitvec.c``: bit
-    ``msb - k`` of a ``[msb:lsb]`` vector). This is how a bit slice is written.
-``+{alias} <one of the two forms above>``
-    The same trace, shown under ``alias``.
-
-Because a slice needs its parent's declared range, ``render_gtkw`` reads the declared ranges from
-the dump's header (FST hierarchy block, or VCD ``$var`` lines) when the dump file exists. A
-``Trace.path`` may instead carry the declared range itself (``"grng.m_axis_tdata[63:0]"``), in
-which case the dump is not consulted for it. With neither, the trace's own ``[msb:lsb]`` is taken
-to be the whole signal.
+* ``[fpshift_count] <n>``: GTKWSave has the ``fpdecshift`` flag but no line for its shift;
+  GTKWave (``parsewavline()`` in ``src/savefile.c``) applies it to every following trace.
+* GTKWave's naming: a vector is ``scope.name[msb:lsb]`` after its declared range, and a bit
+  slice is a vector combined from single bits ``(k)parent``, k counted from the declared msb
+  (``ExtractNodeSingleBit()`` in ``src/bitvec.c``). pywellen gives widths, not declared ranges:
+  a vector of width w is taken as ``[w-1:0]``, as every vector the generator writes is. A
+  ``Trace.path`` may carry another declared range itself (``"tb.v[39:8]"``); the dump is then
+  not consulted for it. With no dump to read, the trace's own ``[msb:lsb]`` is taken to be the
+  whole signal.
+* a named trace of a multi-bit signal is written as a vector combined from its bits: GTKWave
+  3.3.118 shows a signal the FST declares an enum (Verilator's ctrl ``state_t``) through the
+  FST's own table only, never through a filter file.
+* labels with dots, and the zoom that shows a given time window (``Window``).
 """
 
 from __future__ import annotations
 
-import gzip
 import io
 import math
 import re
-import struct
 import warnings
-import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+
+import pywellen
+from vcd.gtkw import GTKWFlag, GTKWSave, make_translation_filter
 
 from gpf.outputs import atomic_write_text
 
-__all__ = ["Group", "Trace", "render_gtkw", "write_gtkw"]
+__all__ = ["Bits", "Dump", "Group", "Names", "Trace", "Window", "filter_path", "render_filters",
+           "render_gtkw", "write_gtkw"]
 
-# Trace flag bits: `enum TraceEntFlagBits` and the TR_* macros in GTKWave's src/analyzer.h
-# (gtkwave/gtkwave; gtkwave3/src/analyzer.h in v3.3.116, same positions in current master).
-TR_HIGHLIGHT = 1 << 0
-TR_HEX = 1 << 1  # 0x2
-TR_DEC = 1 << 2  # 0x4: unsigned decimal
-TR_BIN = 1 << 3
-TR_OCT = 1 << 4
-TR_RJUSTIFY = 1 << 5  # 0x20: GTKWave's default for every trace
-TR_BLANK = 1 << 9  # 0x200: blank / comment line (group begin and end markers are blanks)
-TR_SIGNED = 1 << 10  # 0x400: signed decimal (GTKWave's "Signed Decimal" sets it without TR_DEC)
-TR_CLOSED = 1 << 22  # 0x400000: group shown collapsed
-TR_GRP_BEGIN = 1 << 23  # 0x800000
-TR_GRP_END = 1 << 24  # 0x1000000
-TR_FPDECSHIFT = 1 << 30  # 0x40000000: decimal shown as value / 2**[fpshift_count]
-
-FLAGS_HEX = TR_RJUSTIFY | TR_HEX  # @22
-FLAGS_UDEC = TR_RJUSTIFY | TR_DEC  # @24
-FLAGS_SDEC = TR_RJUSTIFY | TR_SIGNED  # @420
-FLAGS_UFIX = FLAGS_UDEC | TR_FPDECSHIFT  # @40000024
-FLAGS_SFIX = FLAGS_SDEC | TR_FPDECSHIFT  # @40000420
-FLAGS_GROUP_BEGIN = TR_BLANK | TR_GRP_BEGIN  # @800200
-FLAGS_GROUP_END = TR_BLANK | TR_GRP_END  # @1000200
+# Trace flag bits: `enum TraceEntFlagBits` and the TR_* macros in GTKWave's src/analyzer.h;
+# pyvcd's GTKWFlag holds the same bits.
+TR_HEX = GTKWFlag.hex.value  # 0x2
+TR_DEC = GTKWFlag.dec.value  # 0x4: unsigned decimal
+TR_RJUSTIFY = GTKWFlag.rjustify.value  # 0x20: GTKWave's default for every trace
+TR_BLANK = GTKWFlag.blank.value  # 0x200: blank / comment line (group begin and end markers)
+TR_SIGNED = GTKWFlag.signed.value  # 0x400: signed decimal
+TR_FTRANSLATED = GTKWFlag.ftranslated.value  # 0x2000: values shown through a filter file
+TR_CLOSED = GTKWFlag.closed.value  # 0x400000: group shown collapsed
+TR_GRP_BEGIN = GTKWFlag.grp_begin.value  # 0x800000
+TR_GRP_END = GTKWFlag.grp_end.value  # 0x1000000
+TR_FPDECSHIFT = GTKWFlag.fpdecshift.value  # 0x40000000: decimal shown as value / 2**shift
 
 # GTKWave decimal conversions work on a 64-bit integer; wider vectors fall back to hex.
 MAX_DECIMAL_WIDTH = 64
@@ -81,10 +64,28 @@ MAX_DECIMAL_WIDTH = 64
 # labels are therefore written as U+2024 ONE DOT LEADER, which looks the same but is not '.'.
 LABEL_DOT = "\u2024"
 
+# The window the save file asks for (a window manager shrinks it to a smaller screen), and the
+# width of its waves pane: the window less the signals pane (SIGNALS_WIDTH), the folded search
+# tree's strip, borders and scroll bar (65 pixels, measured on GTKWave 3.3.118 screenshots).
+WINDOW_SIZE = (1600, 1400)
+SIGNALS_WIDTH = 420
+WAVE_PANE = WINDOW_SIZE[0] - SIGNALS_WIDTH - 65
+# GTKWave's calczoom(): a zoom z shows 2^-z dump time units in 200 pixels (zoombase 2).
+PIXELS_PER_FRAME = 200
+
 _RANGE_RE = re.compile(r"^(?P<base>.*)\[(?P<msb>-?\d+):(?P<lsb>-?\d+)\]$")
 
 # A declared range: (msb, lsb) of a vector, or None for a scalar (1-bit, no range).
 Declared = tuple[int, int] | None
+
+
+@dataclass(frozen=True)
+class Names:
+    """Names for a trace's values, through a GTKWave translate filter file: ``name`` names the
+    file (``<view>.<name>.txt`` beside the .gtkw), ``values`` maps raw values to names."""
+
+    name: str
+    values: tuple[tuple[int, str], ...]
 
 
 @dataclass(frozen=True)
@@ -95,67 +96,168 @@ class Trace:
     label: str | None = None  # alias shown in the viewer, e.g. "lane0.z"
     signed: bool = False
     frac_bits: int | None = None  # None: show as hex; int: fixed-point decimal, this many frac bits
+    names: Names | None = None  # show named values (in hex where none is named)
+
+
+@dataclass(frozen=True)
+class Bits:
+    """1-bit signals shown as one vector, the first most significant (GTKWave's Combine Down),
+    e.g. a stream's {tvalid, tready} with ``names`` for its four values."""
+
+    label: str
+    paths: tuple[str, ...]
+    names: Names | None = None
 
 
 @dataclass(frozen=True)
 class Group:
     name: str
-    traces: list[Trace]
+    traces: list[Trace | Bits | Group]  # a group may hold groups
+    closed: bool = False  # shown folded
+
+
+@dataclass(frozen=True)
+class Window:
+    """The time the view opens on, in the dump's time units, with the primary marker."""
+
+    start: int
+    end: int
+    marker: int | None = None
+
+    @property
+    def zoom(self) -> float:
+        per_pixel = max(self.end - self.start, 1) / WAVE_PANE
+        return -math.log2(per_pixel * PIXELS_PER_FRAME)
+
+
+def filter_path(savefile: Path, names: Names) -> Path:
+    """Where the translate filter file of ``names`` lives: beside the save file, absolute (GTKWave
+    opens it from its own working directory)."""
+    return Path(savefile).resolve().with_name(f"{Path(savefile).stem}.{names.name}.txt")
 
 
 def write_gtkw(path: Path, dumpfile: Path, groups: list[Group],
-               window_ps: int | None = None) -> None:
-    """Write the save file for ``dumpfile`` to ``path`` (see ``render_gtkw``)."""
-    atomic_write_text(path, render_gtkw(dumpfile, groups, window_ps))
+               window: Window | None = None) -> list[Path]:
+    """Write the save file for ``dumpfile`` to ``path`` (see ``render_gtkw``) and its translate
+    filter files beside it; return the paths written, the save file first."""
+    filters = render_filters(groups, path)
+    text = render_gtkw(dumpfile, groups, window, savefile=path)
+    for fpath, ftext in filters.items():
+        atomic_write_text(fpath, ftext)
+    atomic_write_text(path, text)
+    return [Path(path), *filters]
 
 
-def render_gtkw(dumpfile: Path, groups: list[Group], window_ps: int | None = None) -> str:
+def render_filters(groups: list[Group], savefile: Path) -> dict[Path, str]:
+    """The translate filter files the traces of ``groups`` use: path -> text."""
+    out: dict[Path, str] = {}
+    for trace in _traces(groups):
+        if trace.names is not None:
+            _check_text("names", trace.names.name, forbid="/\\ \t")
+            width = len(trace.paths) if isinstance(trace, Bits) else trace.msb - trace.lsb + 1
+            text = make_translation_filter(list(trace.names.values), datafmt="hex",
+                                           size=width) + "\n"
+            path = filter_path(savefile, trace.names)
+            if out.setdefault(path, text) != text:
+                raise ValueError(f"names {trace.names.name!r}: two different value lists")
+    return out
+
+
+def render_gtkw(dumpfile: Path, groups: list[Group], window: Window | None = None,
+                savefile: Path | None = None) -> str:
     """Return the text of a GTKWave save file showing ``groups`` of ``dumpfile``.
 
     The text depends only on the arguments and on the dump's header (no dates, no window state).
     ``[dumpfile]`` is written as given: a dump named on GTKWave's command line takes precedence,
-    and GTKWave resolves a relative one from its working directory.
+    and GTKWave resolves a relative one from its working directory. ``savefile`` (default: the
+    dump's name with .gtkw) places the translate filter files.
     """
     dumpfile = Path(dumpfile)
+    savefile = Path(savefile) if savefile is not None else dumpfile.with_suffix(".gtkw")
     _check_text("dumpfile", str(dumpfile))
-    declared = _read_declared(dumpfile)
-    lines = [
-        "[*]",
-        "[*] GTKWave save file written by gpf.rtl.gtkw",
-        "[*]",
-        f'[dumpfile] "{dumpfile}"',
-    ]
-    if window_ps is not None:
-        # GTKWave 3.3 shows about 2^(-zoom - 7.6) ps per pixel in the ~1050-pixel wave pane of
-        # a 1600-pixel window (measured on screenshots of 1 ps-resolution FSTs)
-        zoom = -(math.log2(window_ps / 1050) + 7.6)
-        lines += ["[size] 1600 1000", f"*{zoom:.3f} 0"]
-    flags_now: int | None = None
-
-    def set_flags(flags: int) -> None:
-        nonlocal flags_now
-        if flags != flags_now:
-            lines.append(f"@{flags:x}")
-            flags_now = flags
-
+    declared = Dump.declared_of(dumpfile)
+    out = io.StringIO()
+    save = GTKWSave(out)
+    save.comment("", "GTKWave save file written by gpf.rtl.gtkw", "")
+    save.dumpfile(str(dumpfile), abspath=False)
+    save.size(*WINDOW_SIZE)
+    save.sst_expanded(False)
+    save.signals_width(SIGNALS_WIDTH)
+    if window is not None:
+        save.timestart(max(window.start, 0))
+        save.zoom_markers(window.zoom, -1 if window.marker is None else window.marker)
     for group in groups:
-        _check_text("group name", group.name)
-        set_flags(FLAGS_GROUP_BEGIN)
-        lines.append(f"-{group.name}")
-        for trace in group.traces:
-            flags = _trace_flags(trace)
-            set_flags(flags)
-            if flags & TR_FPDECSHIFT:
-                lines.append(f"[fpshift_count] {trace.frac_bits}")
-            lines.append(_trace_line(trace, declared, dumpfile))
-        set_flags(FLAGS_GROUP_END)
-        lines.append(f"-{group.name}")
-    return "\n".join(lines) + "\n"
+        _write_group(save, group, declared, dumpfile, savefile)
+    return "\n".join(line.rstrip() for line in out.getvalue().splitlines()) + "\n"
 
 
-def _trace_flags(trace: Trace) -> int:
-    if trace.frac_bits is None:
-        return FLAGS_HEX
+def _traces(groups: list[Group | Trace | Bits]) -> list[Trace | Bits]:
+    out: list[Trace | Bits] = []
+    for item in groups:
+        out += _traces(item.traces) if isinstance(item, Group) else [item]
+    return out
+
+
+def _write_group(save: GTKWSave, group: Group, declared: dict[str, Declared] | None,
+                 dumpfile: Path, savefile: Path) -> None:
+    _check_text("group name", group.name)
+    with save.group(group.name, closed=group.closed):
+        for item in group.traces:
+            if isinstance(item, Group):
+                _write_group(save, item, declared, dumpfile, savefile)
+            elif isinstance(item, Bits):
+                _write_bits(save, item, declared, dumpfile, savefile)
+            else:
+                _write_trace(save, item, declared, dumpfile, savefile)
+
+
+def _write_trace(save: GTKWSave, trace: Trace, declared: dict[str, Declared] | None,
+                 dumpfile: Path, savefile: Path) -> None:
+    datafmt, extra = _trace_format(trace)
+    if extra & GTKWFlag.fpdecshift:
+        # not in GTKWSave: the shift GTKWave applies to the following fpdecshift traces
+        save.file.write(f"[fpshift_count] {trace.frac_bits}\n")
+    alias = None
+    if trace.label is not None:
+        _check_text("label", trace.label, forbid="{}")
+        alias = trace.label.replace(".", LABEL_DOT)
+    names = str(filter_path(savefile, trace.names)) if trace.names is not None else None
+    base, parent, bits = _trace_signals(trace, declared, dumpfile)
+    if names is not None and bits is None and parent != base:
+        # GTKWave 3.3.118 shows a signal the FST declares an enum (Verilator's ctrl state_t)
+        # through the FST's table only, never through a filter file; a vector combined from
+        # the signal's bits takes the file
+        bits = list(range(trace.msb - trace.lsb + 1))
+    if bits is None or len(bits) == 1:  # a whole signal, or one bit: a logic waveform
+        save.trace(parent if bits is None else f"({bits[0]}){parent}", alias=alias,
+                   datafmt=datafmt, extraflags=extra, translate_filter_file=names)
+    else:  # a bit slice: the bits combined into one vector
+        save.trace_combined(f"{base}[{trace.msb}:{trace.lsb}]", [(k, parent) for k in bits],
+                            alias=alias, datafmt=datafmt, extraflags=extra,
+                            translate_filter_file=names)
+
+
+def _write_bits(save: GTKWSave, bits: Bits, declared: dict[str, Declared] | None,
+                dumpfile: Path, savefile: Path) -> None:
+    _check_text("label", bits.label, forbid="{}")
+    if not bits.paths:
+        raise ValueError(f"{bits.label}: no signals to combine")
+    for path in bits.paths:
+        _check_text("path", path, forbid="{} \t[]")
+        if declared is not None and path not in declared:
+            raise ValueError(f"{path}: no such signal in {dumpfile}")
+        if declared is not None and declared[path] is not None:
+            raise ValueError(f"{path}: not a 1-bit signal")
+    names = str(filter_path(savefile, bits.names)) if bits.names is not None else None
+    # the label is the combined vector's own name (GTKWave shows it as it shows an alias)
+    save.trace_combined(bits.label.replace(".", LABEL_DOT), list(bits.paths), datafmt="hex",
+                        translate_filter_file=names)
+
+
+def _trace_format(trace: Trace) -> tuple[str, GTKWFlag]:
+    """GTKWSave's datafmt and extra flags: hex, (un)signed decimal, or fixed point."""
+    if trace.names is not None or trace.frac_bits is None:
+        return "hex", GTKWFlag.none
     width = trace.msb - trace.lsb + 1
     if not 0 <= trace.frac_bits < MAX_DECIMAL_WIDTH:
         raise ValueError(f"{trace.path}: frac_bits {trace.frac_bits} not in 0..63")
@@ -164,20 +266,17 @@ def _trace_flags(trace: Trace) -> int:
             f"{trace.path}[{trace.msb}:{trace.lsb}]: GTKWave shows vectors wider than "
             f"{MAX_DECIMAL_WIDTH} bits in hex only"
         )
-    if trace.frac_bits == 0:
-        return FLAGS_SDEC if trace.signed else FLAGS_UDEC
-    return FLAGS_SFIX if trace.signed else FLAGS_UFIX
+    datafmt = "signed" if trace.signed else "dec"
+    return datafmt, GTKWFlag.fpdecshift if trace.frac_bits else GTKWFlag.none
 
 
-def _trace_line(trace: Trace, declared: dict[str, Declared] | None, dumpfile: Path) -> str:
+def _trace_signals(trace: Trace, declared: dict[str, Declared] | None, dumpfile: Path
+                   ) -> tuple[str, str, list[int] | None]:
+    """The signal's name without range, GTKWave's name of it and, for a part of it, the bits (k
+    counted from the declared msb, most significant first); None for the whole signal."""
     if trace.msb < trace.lsb or trace.lsb < 0:
         raise ValueError(f"{trace.path}: range [{trace.msb}:{trace.lsb}] must have msb >= lsb >= 0")
     _check_text("path", trace.path, forbid="{} \t")
-    alias = ""
-    if trace.label is not None:
-        _check_text("label", trace.label, forbid="{}")
-        alias = "+{" + trace.label.replace(".", LABEL_DOT) + "} "
-
     match = _RANGE_RE.match(trace.path)
     if match:  # the path carries its declared range
         base = match["base"]
@@ -194,19 +293,15 @@ def _trace_line(trace: Trace, declared: dict[str, Declared] | None, dumpfile: Pa
     if decl is None:
         if trace.msb != 0 or trace.lsb != 0:
             raise ValueError(f"{base} is a 1-bit signal, not [{trace.msb}:{trace.lsb}]")
-        return f"{alias}{base}"
+        return base, base, None
     dmsb, dlsb = decl
     parent = f"{base}[{dmsb}:{dlsb}]"
     if (trace.msb, trace.lsb) == (dmsb, dlsb):
-        return f"{alias}{parent}"
+        return base, parent, None
     lo, hi = min(dmsb, dlsb), max(dmsb, dlsb)
     if not (lo <= trace.lsb and trace.msb <= hi):
         raise ValueError(f"{base}[{trace.msb}:{trace.lsb}] is outside {parent}")
-    # (k) counts from the declared msb: bit b is k = |dmsb - b|.
-    bits = " ".join(f"({abs(dmsb - b)}){parent}" for b in range(trace.msb, trace.lsb - 1, -1))
-    if trace.msb == trace.lsb:  # a single bit is a plain node, drawn as a logic waveform
-        return f"{alias}{bits}"
-    return f"{alias}#{{{base}[{trace.msb}:{trace.lsb}]}} {bits}"
+    return base, parent, [abs(dmsb - b) for b in range(trace.msb, trace.lsb - 1, -1)]
 
 
 def _check_text(what: str, text: str, forbid: str = "") -> None:
@@ -215,192 +310,83 @@ def _check_text(what: str, text: str, forbid: str = "") -> None:
         raise ValueError(f"{what} {text!r}: must be non-empty, without {sorted(bad)}")
 
 
-# --- declared ranges from the dump header ---------------------------------------------------
+# --- the dump, through pywellen -------------------------------------------------------------
 
 
-def _read_declared(dumpfile: Path) -> dict[str, Declared] | None:
-    """Map each signal's full name (without range) to its declared range.
+class Dump:
+    """An FST or VCD file's variables, by the names GTKWave gives them, and their values."""
 
-    None when the dump is missing or its header cannot be read (then a warning says why).
-    """
-    try:
-        with open(dumpfile, "rb") as f:
-            head = f.read(1)
-            f.seek(0)
-            if head and head[0] in (_FST_BL_HDR, _FST_BL_ZWRAPPER):
-                names = _fst_vars(f)
-            elif head.isspace() or head == b"$":
-                names = _vcd_vars(f)
-            else:
-                raise ValueError("neither FST nor VCD")
-            return _declared_from_names(names)
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError, IndexError, EOFError, struct.error, zlib.error) as exc:
-        warnings.warn(
-            f"{dumpfile}: declared ranges not read ({exc}); bit slices need the range in the path",
-            stacklevel=3,
-        )
-        return None
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        with self._unreadable():
+            wave = pywellen.Waveform(str(self.path))
+            self._vars = {_gtkwave_name(v): v for v in wave.all_vars()}
 
-
-def _declared_from_names(names: list[tuple[str, int]]) -> dict[str, Declared]:
-    """GTKWave's naming (extractNextVar() in src/fst.c): spaces dropped, a trailing [msb:lsb]
-    is the declared range, a vector without one is [length-1:0]."""
-    out: dict[str, Declared] = {}
-    for raw, length in names:
-        name = raw.replace(" ", "")
-        match = _RANGE_RE.match(name)
-        if match:
-            out.setdefault(match["base"], (int(match["msb"]), int(match["lsb"])))
-        else:
-            out.setdefault(name, (length - 1, 0) if length > 1 else None)
-    return out
-
-
-def _vcd_vars(f: BinaryIO) -> list[tuple[str, int]]:
-    words: list[str] = []
-    for raw in f:
-        line = raw.decode("latin-1").split()
-        words += line
-        if "$enddefinitions" in line:
-            break
-    scopes: list[str] = []
-    names: list[tuple[str, int]] = []
-    i = 0
-    while i < len(words):
+    @contextmanager
+    def _unreadable(self) -> Iterator[None]:
+        """pywellen's errors as ValueError: a RuntimeError for a file it cannot read, a Rust
+        panic (pyo3's PanicException, a BaseException) for a damaged or unfinished one."""
         try:
-            end = words.index("$end", i)
-        except ValueError:
-            end = len(words)
-        if words[i] == "$scope":
-            scopes.append(words[i + 2])
-        elif words[i] == "$upscope":
-            scopes.pop()
-        elif words[i] == "$var":  # $var <type> <size> <id> <ref> [range] $end
-            names.append((".".join([*scopes, "".join(words[i + 4 : end])]), int(words[i + 2])))
-        i = end + 1
-    return names
+            yield
+        except BaseException as exc:
+            if not isinstance(exc, Exception) and type(exc).__name__ != "PanicException":
+                raise
+            raise ValueError(f"{self.path}: not a readable FST or VCD ({exc})") from exc
+
+    def declared(self) -> dict[str, Declared]:
+        """Each signal's declared range: [width-1:0] (pywellen gives no other), None for 1 bit."""
+        return {name: (v.bitwidth - 1, 0) if v.bitwidth > 1 else None
+                for name, v in self._vars.items()}
+
+    @classmethod
+    def declared_of(cls, path: Path) -> dict[str, Declared] | None:
+        """``declared()`` of the dump at ``path``; None when there is none, or when it cannot be
+        read (then a warning says why)."""
+        if not Path(path).exists():
+            return None
+        try:
+            return cls(path).declared()
+        except ValueError as exc:
+            warnings.warn(f"{exc}: declared ranges not read; bit slices need the range in "
+                          "the path", stacklevel=3)
+            return None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._vars
+
+    def changes(self, name: str) -> list[tuple[int, int | None]]:
+        """(time, value) of each change of a signal (value None where not 0/1 bits)."""
+        out = []
+        var = self._vars[name]
+        with self._unreadable():
+            signal = var.signal
+            for i in range(len(signal)):
+                time, value = signal[i]
+                out.append((time, value if isinstance(value, int) else None))
+        return out
+
+    def all_high(self, *names: str) -> list[int]:
+        """The times at which the 1-bit signals ``names`` become all 1 together."""
+        events = sorted((t, i, v) for i, n in enumerate(names) for t, v in self.changes(n))
+        now = [0] * len(names)
+        out: list[int] = []
+        high = False
+        for k, (time, i, value) in enumerate(events):
+            now[i] = value or 0
+            if k + 1 < len(events) and events[k + 1][0] == time:
+                continue  # every change at this time first
+            if all(now) and not high:
+                out.append(time)
+            high = all(now)
+        return out
 
 
-# FST block and hierarchy tags: src/helpers/fst/fstapi.h (enum fstBlockType, fstHierType).
-_FST_BL_HDR = 0
-_FST_BL_HIER = 4
-_FST_BL_HIER_LZ4 = 6
-_FST_BL_HIER_LZ4DUO = 7
-_FST_BL_ZWRAPPER = 254
-_FST_VT_MAX = 29
-_FST_ST_GEN_ATTRBEGIN = 252
-_FST_ST_GEN_ATTREND = 253
-_FST_ST_VCD_SCOPE = 254
-_FST_ST_VCD_UPSCOPE = 255
-
-
-def _fst_vars(f: BinaryIO) -> list[tuple[str, int]]:
-    """(full name, length) of every variable in an FST file's hierarchy block.
-
-    Blocks: kind byte, u64 length counting itself, body. The hierarchy is written last, when the
-    simulator closes the file."""
-    while head := f.read(9):
-        if len(head) < 9:
-            break
-        kind = head[0]
-        (seclen,) = struct.unpack(">Q", head[1:])
-        if kind == _FST_BL_ZWRAPPER:  # whole file gzip-wrapped: u64 length, gzip stream
-            return _fst_vars(io.BytesIO(gzip.decompress(f.read(seclen - 8)[8:])))
-        if kind not in (_FST_BL_HIER, _FST_BL_HIER_LZ4, _FST_BL_HIER_LZ4DUO):
-            f.seek(seclen - 8, io.SEEK_CUR)
-            continue
-        body = f.read(seclen - 8)  # u64 unpacked length, packed hierarchy
-        (uclen,) = struct.unpack_from(">Q", body, 0)
-        packed = body[8:]
-        if kind == _FST_BL_HIER:
-            hier = gzip.decompress(packed)
-        elif kind == _FST_BL_HIER_LZ4:
-            hier = _lz4_block(packed, uclen)
-        else:  # LZ4 applied twice; the varint length of the middle stage comes first
-            uclen2, skip = _varint(packed, 0)
-            hier = _lz4_block(_lz4_block(packed[skip:], uclen2), uclen)
-        return _fst_hier(hier)
-    raise ValueError("no hierarchy block (is the simulation still writing it?)")
-
-
-def _fst_hier(data: bytes) -> list[tuple[str, int]]:
-    # Record layout: fstReaderIterateHier() in src/helpers/fst/fstapi.c.
-    scopes: list[str] = []
-    names: list[tuple[str, int]] = []
-    pos = 0
-    while pos < len(data):
-        tag = data[pos]
-        pos += 1
-        if tag == _FST_ST_VCD_SCOPE:  # type, name\0, component\0
-            name, pos = _cstr(data, pos + 1)
-            _, pos = _cstr(data, pos)
-            scopes.append(name)
-        elif tag == _FST_ST_VCD_UPSCOPE:
-            scopes.pop()
-        elif tag == _FST_ST_GEN_ATTRBEGIN:  # type, subtype, name\0, varint
-            _, pos = _cstr(data, pos + 2)
-            _, pos = _varint(data, pos)
-        elif tag == _FST_ST_GEN_ATTREND:
-            pass
-        elif tag <= _FST_VT_MAX:  # var: direction, name\0, varint length, varint alias
-            name, pos = _cstr(data, pos + 1)
-            length, pos = _varint(data, pos)
-            _, pos = _varint(data, pos)
-            names.append((".".join([*scopes, name]), length))
-        else:
-            raise ValueError(f"unknown FST hierarchy tag {tag}")
-    return names
-
-
-def _cstr(data: bytes, pos: int) -> tuple[str, int]:
-    end = data.index(0, pos)
-    return data[pos:end].decode("latin-1"), end + 1
-
-
-def _varint(data: bytes, pos: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte = data[pos]
-        pos += 1
-        value |= (byte & 0x7F) << shift
-        shift += 7
-        if byte < 0x80:
-            return value, pos
-
-
-def _lz4_block(src: bytes, size: int) -> bytes:
-    """Decode one raw LZ4 block (no frame header) of ``size`` decoded bytes."""
-    out = bytearray()
-    pos = 0
-    while pos < len(src) and len(out) < size:
-        token = src[pos]
-        pos += 1
-        count = token >> 4
-        if count == 15:
-            while True:
-                count += src[pos]
-                pos += 1
-                if src[pos - 1] != 255:
-                    break
-        out += src[pos : pos + count]
-        pos += count
-        if pos >= len(src) or len(out) >= size:
-            break
-        offset = src[pos] | src[pos + 1] << 8
-        pos += 2
-        count = token & 15
-        if count == 15:
-            while True:
-                count += src[pos]
-                pos += 1
-                if src[pos - 1] != 255:
-                    break
-        count += 4
-        start = len(out) - offset
-        if offset == 0 or start < 0:
-            raise ValueError("corrupt LZ4 block")
-        chunk = out[start : start + count]
-        out += (chunk * (count // len(chunk) + 1))[:count]  # the match may overlap its output
-    return bytes(out[:size])
+def _gtkwave_name(var: pywellen.Var) -> str:
+    """pywellen's full name, with an array element's name completed: Verilator puts ``a[3]`` of
+    an unpacked array ``a`` in a scope ``a``, which pywellen names ``a.[3]`` and GTKWave
+    ``a.a[3]``."""
+    name = var.full_name
+    if var.name.startswith("["):
+        scope = name[: -len(var.name) - 1]
+        name = f"{scope}.{scope.rpartition('.')[2]}{var.name}"
+    return name.replace(" ", "")

@@ -1,21 +1,29 @@
 """Wave views: for each module, the signals grouped and fixed-point fields shown as decimals.
 
-The .gtkw is written next to the FST by `gpf sim --waves` and by `gpf waves`, which also opens
-GTKWave on it.
+The .gtkw (and its translate filter files: named states, flags, stream handshakes) is written
+next to the FST, in the waves run's own build folder (build/<config>/<sim>/<module>-waves/), by
+`gpf sim --waves` / `gpf run --waves` and by `gpf waves`, which also opens GTKWave on it where
+there is a display. A view opens on the first result (a whole filter) or first output beat (a
+block), the primary marker on it.
 """
 
 from __future__ import annotations
 
+import os
+import re
 import shutil
 import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from gpf.config import Config
+from gpf.model.blocks import Flag
 from gpf.model.fixed import Format
 from gpf.model.formats import SHIFT_BITS, datapath
 from gpf.rtl.generate import (
     MODULES,
+    TEMPLATE_DIR,
     cholesky_context,
     cordic_atan2_context,
     exp_context,
@@ -28,7 +36,7 @@ from gpf.rtl.generate import (
     sigma_predict_context,
     sqrt_context,
 )
-from gpf.rtl.gtkw import Group, Trace, write_gtkw
+from gpf.rtl.gtkw import Bits, Dump, Group, Names, Trace, Window, write_gtkw
 from gpf.tb.harness import CLOCK_NS
 from gpf.toolchain import ToolchainError
 
@@ -528,42 +536,217 @@ def _fields(path: str, fields: list, lanes: int = 1, only: set[str] | None = Non
     return out
 
 
-def filter_view(cfg: Config, sim: str, top: str | None = None) -> list[Group]:
-    """gpf_<app> (or the core at `top`): the controller, the per-step streams and both debug
-    taps."""
+# {tvalid, tready} of a stream, as one trace with named values (stall: valid, not ready)
+HANDSHAKE = Names("handshake", ((0, "idle"), (1, "ready"), (2, "stall"), (3, "beat")))
+# a step's flags (gpf.model.blocks.Flag) by name, the set bits joined by '+'
+FLAGS = Names("flags", tuple((v, "+".join(f.name for f in reversed(Flag) if v & f) or "-")
+                             for v in range(16)))
+
+
+def _state_names(template: Path | None = None) -> Names:
+    """ctrl's states by value, read from its template's `typedef enum ... state_t`."""
+    text = (template or TEMPLATE_DIR / "ctrl.sv.j2").read_text()
+    match = re.search(r"typedef enum logic \[(\d+):0\] \{(.*?)\} state_t;", text, re.S)
+    if match is None:
+        raise ValueError("ctrl.sv.j2: no `typedef enum logic [n:0] {...} state_t`")
+    body = re.sub(r"//[^\n]*", "", match[2])
+    states = [name.strip() for name in body.split(",")]
+    if not all(re.fullmatch(r"S_\w+", name) for name in states) or \
+            len(states) > 1 << (int(match[1]) + 1):
+        raise ValueError(f"ctrl.sv.j2: state_t is not a list of S_ names: {states}")
+    return Names("state", tuple(enumerate(states)))
+
+
+def _handshake(label: str, valid: str, ready: str) -> Bits:
+    return Bits(label, (valid, ready), HANDSHAKE)
+
+
+def _stream_data(label: str, valid: str, ready: str, last: str | None, data: list[Trace],
+                 ) -> Group:
+    """One stream's handshake bits and fields."""
+    return Group(label, [_bit(valid, "tvalid"), _bit(ready, "tready")]
+                 + ([_bit(last, "tlast")] if last else []) + data)
+
+
+def _step_fields(path: str, fields: list) -> list[Trace]:
+    """A step input's fields, with their units (bot: the bearing, in units of pi rad)."""
+    units = {"z": "bearing z (units of pi rad)", "ox": "observer x", "oy": "observer y"}
+    units |= {f"omega{k}": f"omega{k} (rad/s)" for k in range(3)}
+    units |= {f"accel{k}": f"accel{k} (m/s^2)" for k in range(3)}
+    units |= {f"v{k}": f"v_gps{k} (m/s)" for k in range(3)}
+    return [Trace(t.path, t.msb, t.lsb, label=units.get(t.label, t.label), signed=t.signed,
+                  frac_bits=t.frac_bits) for t in _fields(path, fields)]
+
+
+def _matrices(path: str, fields: list, only: str = "sl") -> list[Group]:
+    """Sigma and L of a beat (fields s<i>_<j>, l<i>_<j>) in a group each, lower triangle."""
+    groups = []
+    for prefix, name in (("s", "Sigma"), ("l", "L")):
+        if prefix not in only:
+            continue
+        traces = [Trace(t.path, t.msb, t.lsb, signed=t.signed, frac_bits=t.frac_bits,
+                        label=f"{name}_{t.label[1:].replace('_', '')}")
+                  for t in _fields(path, fields)
+                  if re.fullmatch(rf"{prefix}\d+_\d+", t.label or "")]
+        groups.append(Group(name, traces))
+    return groups
+
+
+def filter_view(cfg: Config, sim: str, top: str | None = None, clock: bool = True
+                ) -> list[Group]:
+    """gpf_<app> (or the core at `top`): the controller's state by name, every stream's
+    handshake, the result (mu, Sigma, L, flags, ESS), the step input; folded: the init and seed
+    streams, each stream's fields and both debug taps."""
     from gpf.model.fixed_gpf import FixedGPF
     from gpf.tb.gpf.filter import streams
+    from gpf.tb.scoreboard import Field
 
-    s = streams(FixedGPF(cfg))
+    gpf = FixedGPF(cfg)
+    dp, s, lanes = gpf.dp, streams(gpf), cfg.lanes
     top = top or scope(sim, f"gpf_{cfg.app}")
-    handshake = [_bit(f"{top}.{name}_{sig}") for name in ("s_init", "s_step", "m_est")
-                 for sig in ("tvalid", "tready")]
-    mu = {f.name for f in s.est if f.name.startswith("mu")}
-    return [
-        Group("clock and reset", [_bit(f"{top}.clk"), _bit(f"{top}.rst")]),
-        Group("controller", [
-            Trace(f"{top}.u_ctrl.state_q", 3, 0, label="state (0 idle .. 3 ready, 4 run, "
-                  "5 moments, 6 ESS, 7 prediction, 8-9 Cholesky, 10 out)", frac_bits=0),
-            Trace(f"{top}.u_ctrl.left_q", cfg.particles.bit_length() - 1, 0,
-                  label="particles left to send", frac_bits=0),
-            Trace(f"{top}.u_ctrl.flags_q", 3, 0,
-                  label="flags (LOW_ESS, NOT_PD, ZERO_WEIGHTS, SAT)"),
-            _bit(f"{top}.u_ctrl.pred_done_q", "predicted Sigma ready"),
-            Trace(f"{top}.u_ctrl.cycles_q", 31, 0, label="clocks this step", frac_bits=0)]
-            + handshake),
-        Group("step input", _fields(f"{top}.s_step_tdata", s.step)),
-        Group("result", _fields(f"{top}.m_est_tdata", s.est,
-                                only=mu | {"flags", "cycles", "ess"})),
-        Group("conditioning tap", [_bit(f"{top}.m_cond_tvalid"), _bit(f"{top}.m_cond_tready"),
-                                   _bit(f"{top}.m_cond_tlast")]
-              + _fields(f"{top}.m_cond_tdata", s.cond, cfg.lanes)),
-        Group("particle tap", [_bit(f"{top}.m_part_tvalid"), _bit(f"{top}.m_part_tready"),
-                               _bit(f"{top}.m_part_tlast")]
-              + _fields(f"{top}.m_part_tdata", s.part, cfg.lanes)
-              + [Trace(f"{top}.m_part_tdata", cfg.lanes * sum(f.fmt.width for f in s.part)
-                       + SHIFT_BITS - 1, cfg.lanes * sum(f.fmt.width for f in s.part),
-                       label="shift (rescale)", frac_bits=0)]),
+    n, draws = dp.n, dp.draws()
+    ctrl = f"{top}.u_ctrl"
+
+    def sig(name: str) -> str:
+        return f"{top}.{name}"
+
+    x = [f for f in s.cond if f.name != "sat"]
+    e = [Field(f"e{j}", dp.noise) for j in range(draws)]
+    xw = sum(f.fmt.width for f in x)
+    mo = moments_context(cfg)
+    ch = cholesky_context(cfg)
+    sp = sigma_predict_context(cfg)
+
+    # moments' result: mu, Sigma, flags (3 bits), ESS
+    off = n * mo["word"]
+    mo_fields = [Trace(sig("mo_m_data"), (i + 1) * mo["word"] - 1, i * mo["word"], signed=True,
+                       label=f"mu{i}", frac_bits=dp.x[i].frac_bits) for i in range(n)]
+    for d in mo["sig"]:
+        mo_fields.append(Trace(sig("mo_m_data"), off + d["out_w"] - 1, off, signed=True,
+                               label=f"Sigma_{d['i']}{d['j']}",
+                               frac_bits=dp.cov_frac(d["i"], d["j"])))
+        off += d["out_w"]
+    mo_fields += [Trace(sig("mo_m_data"), off + 2, off, label="flags (ZERO_WEIGHTS, SAT)"),
+                  Trace(sig("mo_m_data"), off + 2 + dp.ess.width, off + 3,
+                        label=f"ESS ({dp.ess})", frac_bits=dp.ess.frac_bits)]
+
+    def sigma_in(path: str) -> list[Trace]:
+        return [Trace(path, p["off"] + p["w"] - 1, p["off"], signed=True,
+                      label=f"Sigma_{p['i']}{p['j']}", frac_bits=dp.cov_frac(p["i"], p["j"]))
+                for p in ch["inputs"]]
+
+    def diagonal(path: str) -> list[Trace]:
+        return [t for t in sigma_in(path) if t.label[-1] == t.label[-2]]
+
+    l_w = ch["w"]
+    chol_out = [Trace(sig("ch_m_data"), p["off"] + l_w - 1, p["off"], signed=True,
+                      label=f"L_{p['i']}{p['j']}", frac_bits=dp.chol[p["i"]].frac_bits)
+                for p in ch["outputs"]] + [
+        Trace(sig("ch_m_data"), ch["out_width"] - 3, ch["out_width"] - 3, label="SAT"),
+        Trace(sig("ch_m_data"), ch["out_width"] - 1, ch["out_width"] - 1, label="NOT_PD")]
+    part_w = sum(f.fmt.width for f in s.part)
+    mlw = xw + dp.weight.width
+
+    handshakes = [
+        _handshake("s_step -> ctrl", sig("s_step_tvalid"), sig("s_step_tready")),
+        _handshake("grng -> sample_cond", sig("ss_valid"), sig("ss_ready")),
+        _handshake("ctrl -> propagate (ref)", sig("ref_m_valid"), sig("pr_s_ready")),
+        _handshake("sample_cond -> propagate", sig("pi_valid"), sig("pi_ready")),
+        _handshake("propagate -> ctrl (ref)", sig("ref_s_valid"), sig("ref_s_ready")),
+        _handshake("propagate -> weight", sig("wt_s_valid"), sig("wt_s_ready")),
+        _handshake("weight -> moments", sig("mo_s_valid"), sig("mo_s_ready")),
+        _handshake("moments -> ctrl", sig("mo_m_valid"), sig("mo_m_ready")),
+        _handshake("ctrl -> sigma_predict", sig("pd_s_valid"), sig("pd_s_ready")),
+        _handshake("sigma_predict -> ctrl", sig("pd_m_valid"), sig("pd_m_ready")),
+        _handshake("ctrl -> cholesky", sig("ch_s_valid"), sig("ch_s_ready")),
+        _handshake("cholesky -> ctrl", sig("ch_m_valid"), sig("ch_m_ready")),
+        _handshake("ctrl -> m_est", sig("m_est_tvalid"), sig("m_est_tready")),
     ]
+    data = [
+        # e0..e<n-1> go to sample_cond, the rest (the process draws) to propagate
+        _stream_data("grng -> sample_cond: draws", sig("ss_valid"), sig("ss_ready"),
+                     sig("ss_last"),
+                     _fields(sig("ss_data"), e, lanes)),
+        _stream_data("ctrl -> propagate: reference mu", sig("ref_m_valid"),
+                     sig("pr_s_ready"), None, _fields(sig("ref_m_data"), x)),
+        # the step's reference first, then the particles
+        _stream_data("sample_cond -> propagate: x, draws",
+                     sig("pi_valid"), sig("pi_ready"), sig("pi_last"),
+                     _fields(sig("pi_data"), x + e[n:], lanes)),
+        _stream_data("propagate -> ctrl: reference", sig("ref_s_valid"),
+                     sig("ref_s_ready"), None, _fields(sig("pq_data"), x)),
+        _stream_data("propagate -> weight: x', sat", sig("wt_s_valid"), sig("wt_s_ready"),
+                     sig("pq_last"), _fields(sig("pq_data"), s.cond, lanes)),
+        _stream_data("weight -> moments: x, w, shift", sig("mo_s_valid"),
+                     sig("mo_s_ready"), sig("wq_last"),
+                     _fields(sig("mo_s_data"), s.part[:-1], lanes)
+                     + [Trace(sig("mo_s_data"), lanes * mlw + SHIFT_BITS - 1, lanes * mlw,
+                              label="shift (rescale)", frac_bits=0)]),
+        _stream_data("moments -> ctrl: mu, Sigma, ESS", sig("mo_m_valid"),
+                     sig("mo_m_ready"), sig("mo_m_last"), mo_fields),
+        _stream_data("ctrl -> sigma_predict: Sigma diag.", sig("pd_s_valid"),
+                     sig("pd_s_ready"), sig("pd_s_last"), diagonal(sig("pd_s_data"))),
+        _stream_data("sigma_predict -> ctrl: Sigma diag.", sig("pd_m_valid"),
+                     sig("pd_m_ready"), sig("pd_m_last"),
+                     [t for t in diagonal(sig("pd_m_data")) if t.msb < sp["out_width"]]),
+        _stream_data("ctrl -> cholesky: Sigma", sig("ch_s_valid"), sig("ch_s_ready"),
+                     sig("ch_s_last"), sigma_in(sig("ch_s_data"))),
+        _stream_data("cholesky -> ctrl: L, flags", sig("ch_m_valid"), sig("ch_m_ready"),
+                     sig("ch_m_last"), chol_out),
+    ]
+    mu = [f for f in s.est if f.name.startswith("mu")]
+    est = sig("m_est_tdata")
+    labels = {"cycles": "clocks of the step", "ess": "ESS"}
+    groups = [
+        Group("controller", [
+            Trace(f"{ctrl}.state_q", 3, 0, label="state", names=_state_names()),
+            Trace(f"{ctrl}.left_q", cfg.particles.bit_length() - 1, 0,
+                  label="particles left to send", frac_bits=0),
+            Trace(f"{ctrl}.flags_q", 3, 0, label="flags so far", names=FLAGS),
+            _bit(f"{ctrl}.pred_done_q", "predicted Sigma ready"),
+            Trace(f"{ctrl}.cycles_q", 31, 0, label="clocks this step", frac_bits=0)]),
+        Group("streams: valid and ready", handshakes),
+        Group("result (m_est)", [
+            *_fields(est, s.est, only={f.name for f in mu}),
+            *_matrices(est, s.est),
+            Trace(est, *_field_range(s.est, "flags"), label="flags", names=FLAGS),
+            Trace(est, *_field_range(s.est, "sticky"), label="sticky flags", names=FLAGS),
+            *[Trace(t.path, t.msb, t.lsb, label=labels[t.label], frac_bits=t.frac_bits)
+              for t in _fields(est, s.est, only=set(labels))]]),
+        Group("step input (s_step)", _step_fields(sig("s_step_tdata"), s.step)),
+        Group("init (s_init): N, mu0, Sigma0", [
+            _bit(sig("s_init_tvalid"), "tvalid"), _bit(sig("s_init_tready"), "tready"),
+            *_fields(sig("s_init_tdata"), s.init, only={"particles"} | {f.name for f in mu}),
+            *_matrices(sig("s_init_tdata"), s.init, only="s")], closed=True),
+        Group("seed (s_seed)", [_bit(sig("s_seed_tvalid"), "tvalid"),
+                                _bit(sig("s_seed_tready"), "tready"),
+                                Trace(sig("s_seed_tdata"), 63, 0, label="seed word")],
+              closed=True),
+        Group("streams: fields", data, closed=True),
+        Group("conditioning tap (m_cond)", [_bit(sig("m_cond_tvalid"), "tvalid"),
+                                            _bit(sig("m_cond_tready"), "tready"),
+                                            _bit(sig("m_cond_tlast"), "tlast")]
+              + _fields(sig("m_cond_tdata"), s.cond, lanes), closed=True),
+        Group("particle tap (m_part)", [_bit(sig("m_part_tvalid"), "tvalid"),
+                                        _bit(sig("m_part_tready"), "tready"),
+                                        _bit(sig("m_part_tlast"), "tlast")]
+              + _fields(sig("m_part_tdata"), s.part, lanes)
+              + [Trace(sig("m_part_tdata"), lanes * part_w + SHIFT_BITS - 1, lanes * part_w,
+                       label="shift (rescale)", frac_bits=0)], closed=True),
+    ]
+    if clock:
+        groups.append(Group("clock and reset", [_bit(sig("clk")), _bit(sig("rst"))]))
+    return groups
+
+
+def _field_range(fields: list, name: str) -> tuple[int, int]:
+    """(msb, lsb) of the field `name` in fields packed LSB first."""
+    off = 0
+    for f in fields:
+        if f.name == name:
+            return off + f.fmt.width - 1, off
+        off += f.fmt.width
+    raise KeyError(name)
 
 
 VIEWS: dict[str, Callable[[Config, str], list[Group]]] = {"grng": grng_view, "exp": exp_view}
@@ -598,7 +781,7 @@ def ip_view(cfg: Config, sim: str) -> list[Group]:
             Trace(f"{top}.taken_q", 31, 0, label="steps taken", frac_bits=0),
             Trace(f"{top}.done_q", 31, 0, label="STEPS (results sent)", frac_bits=0),
             _bit(f"{top}.irq")]),
-        *filter_view(cfg, sim, f"{top}.u_core")[1:],
+        *filter_view(cfg, sim, f"{top}.u_core", clock=False),
     ]
 
 
@@ -606,28 +789,94 @@ VIEWS.update(gpf_bot_axi=ip_view, gpf_uav_axi=ip_view)
 
 
 def waves_dir(cfg: Config, sim: str, module: str, build_root: Path = Path("build")) -> Path:
-    return build_root / cfg.name / sim / module
+    """Where a waves run of `module` builds and writes <module>.fst (its own folder, beside the
+    run without waves: gpf.sim.sim_build_dir)."""
+    from gpf.sim import sim_build_dir
+
+    return sim_build_dir(build_root / cfg.name, sim, module, waves=True)
+
+
+def view_window(cfg: Config, module: str, sim: str, dump: Dump) -> Window | None:
+    """Where the view opens: a whole filter on its first step, from the step input to a while
+    after the first result (the marker); a block from its first input beat to a few clocks past
+    its first output beat (the marker). None when the dump shows no such beat."""
+    clock = CLOCK_NS * 1000  # the dumps' time unit is 1 ps
+    top = MODULES[module].top
+    if MODULES[module].is_filter:
+        core = f"{top}.u_core" if module.endswith("_axi") else top
+        results = _beats(dump, core, "m_est")
+        if not results:
+            return None
+        steps = [t for t in _beats(dump, core, "s_step") if t < results[0]]
+        start = steps[-1] if steps else max(results[0] - 400 * clock, 0)
+        span = results[0] - start
+        return Window(start - span // 20, results[0] + span * 2 // 5, marker=results[0])
+    outputs = _beats(dump, top, "m_axis")
+    if not outputs:
+        return None
+    inputs = [t for t in _beats(dump, top, "s_axis") if t < outputs[0]]
+    start = inputs[0] - 2 * clock if inputs else outputs[0] - 16 * clock
+    return Window(max(start, 0), max(outputs[0] + 8 * clock, start + 24 * clock),
+                  marker=outputs[0])
+
+
+def _beats(dump: Dump, scope_: str, stream: str) -> list[int]:
+    """When a stream's transfers start (tvalid and tready both high), [] where it has none."""
+    valid, ready = f"{scope_}.{stream}_tvalid", f"{scope_}.{stream}_tready"
+    if valid not in dump or ready not in dump:
+        return []
+    return dump.all_high(valid, ready)
 
 
 def write_view(cfg: Config, module: str, sim: str, fst: Path) -> Path:
+    """Write <fst>.gtkw (and its filter files) for the dump `fst`; return the .gtkw's path."""
     gtkw = fst.with_suffix(".gtkw")
-    # open on the first 24 clocks: reset, pipeline fill, the first samples readable (a whole
-    # filter: its first step)
-    clocks = 400 if MODULES[module].is_filter else 24
-    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim), window_ps=clocks * CLOCK_NS * 1000)
+    try:
+        window = view_window(cfg, module, sim, Dump(fst)) if fst.exists() else None
+    except (ValueError, KeyError):
+        window = None
+    if window is None:  # the first 24 clocks (a whole filter: 400, its first step)
+        clocks = 400 if MODULES[module].is_filter else 24
+        window = Window(0, clocks * CLOCK_NS * 1000)
+    write_gtkw(gtkw, fst, VIEWS[module](cfg, sim), window)
     return gtkw
 
 
+def has_display() -> bool:
+    """Whether GTKWave can open a window: macOS, or an X11 / Wayland display named."""
+    return sys.platform == "darwin" or bool(os.environ.get("DISPLAY")
+                                            or os.environ.get("WAYLAND_DISPLAY"))
+
+
+GTKWAVE_INSTALL = ("brew install --cask gtkwave" if sys.platform == "darwin"
+                   else "apt-get install gtkwave")
+
+
 def open_waves(cfg: Config, module: str, sim: str, launch: bool = True) -> int:
+    """Write the view of the last waves run of `module` and open GTKWave on it (with `launch`,
+    where there is a display)."""
+    from gpf.config import regenerate_command
+
     fst = waves_dir(cfg, sim, module) / f"{module}.fst"
     if not fst.exists():
-        raise ToolchainError(f"no waves at {fst}: run `make sim MODULE={module} "
-                             f"CONFIG={cfg.name} SIM={sim} WAVES=1` first")
+        run = regenerate_command(cfg).replace("gpf generate", "gpf sim", 1)
+        raise ToolchainError(f"no waves at {fst}: run `{run} --module {module} --sim {sim} "
+                             "--waves` first")
     gtkw = write_view(cfg, module, sim, fst)
+    command = f"gtkwave {fst} {gtkw}"
+    installed = shutil.which("gtkwave") is not None
+    if launch and not has_display():
+        print(f"waves: {fst}, view: {gtkw}; GTKWave needs a display (DISPLAY is unset): open "
+              f"them where there is one ({command})"
+              + ("" if installed else f"; GTKWave is not installed: {GTKWAVE_INSTALL}"))
+        return 0
     print(f"waves: {fst}\nview:  {gtkw}")
     if not launch:
         return 0
-    if shutil.which("gtkwave") is None:
-        raise ToolchainError("GTKWave not installed: apt-get install gtkwave "
-                             f"(then: gtkwave {fst} {gtkw})")
-    return subprocess.call(["gtkwave", str(fst), str(gtkw)])
+    if not installed:
+        raise ToolchainError(f"GTKWave not installed: {GTKWAVE_INSTALL} (then: {command})")
+    status = subprocess.call(["gtkwave", str(fst), str(gtkw)])
+    if status != 0:
+        how = f"stopped by signal {-status}" if status < 0 else f"exit status {status}"
+        raise ToolchainError(f"GTKWave failed ({how}): {command}")
+    return 0
