@@ -246,6 +246,14 @@ FILTER_MUTANTS = {
     "ctrl-stall-est": ("ctrl", "ctrl.sv.j2", "assign m_est_tdata = est_q;",
                        "assign m_est_tdata = est_q ^ {{ est_w }}'(m_est_tvalid && !m_est_tready);",
                        "bot_fixed_observer", {}, "test_stalls"),
+    # the handshakes as flip-flops: the step's ready raised without the beat seen offered, so
+    # ctrl takes a step nobody sent (a result too many, inputs that are not the step's)
+    "ctrl-step-unseen": ("ctrl", "ctrl.sv.j2", "state_d == S_READY && s_step_tvalid && "
+                         "!s_step_tready", "state_d == S_READY && !s_step_tready", None, {}),
+    # L taken without its last flag seen: the state moves on a beat the Cholesky never offered
+    "ctrl-chol-unseen": ("ctrl", "ctrl.sv.j2", "assign chol_fire = s_chol_tready && chol_last_q;",
+                         "assign chol_fire = (state_q == S_CHOL_WAIT || state_q == S_INIT_WAIT) "
+                         "&& chol_last_q;", None, {}),
 }
 
 
