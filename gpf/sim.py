@@ -73,20 +73,43 @@ def _forget_objects_built_otherwise(build_dir: Path, opt: str) -> None:
 # with the same switches, yet each build folder compiled it anew: half of a block's build time.
 # The first build of a set of switches keeps its objects, partly linked into one; later builds
 # link that (LOADLIBES) and build none (VM_GLOBAL_*: empty). It lives in build/ whatever the
-# build root, so that tests building elsewhere share it too.
+# build root, so that tests building elsewhere share it too; GPF_VERILATOR_RUNTIME names another
+# folder (the test suite's own build/, for the gpf it runs from other folders).
 RUNTIME_CACHE = Path("build") / ".verilator-runtime"
 RUNTIME_OBJECT = "verilated_runtime.o"
 
 
+# switches that change the generated model and never the runtime's objects (with the number of
+# values each takes): left out of the runtime's key, so a netlist's build shares the RTL's
+MODEL_ONLY_SWITCHES = {"--output-split": 1, "--output-split-cfuncs": 1, "--x-assign": 1,
+                       "--x-initial": 1}
+
+
+def _runtime_switches(build_args: list[str]) -> list[str]:
+    """The switches that may change the runtime's objects (tracing, coverage, timing, threads:
+    anything not known to be the model's alone; warnings are the model's)."""
+    kept, skip = [], 0
+    for arg in build_args:
+        if skip:
+            skip -= 1
+        elif arg in MODEL_ONLY_SWITCHES:
+            skip = MODEL_ONLY_SWITCHES[arg]
+        elif not arg.startswith("-W"):
+            kept.append(arg)
+    return kept
+
+
 def _runtime_cache(build_args: list[str]) -> Path:
     """The folder for the runtime of this Verilator, these switches and this compiler."""
+    build_args = _runtime_switches(build_args)
     root = verilator_root()
     config_h = root / "include" / "verilated_config.h" if root else None
     key = json.dumps([str(root), config_h.read_text() if config_h and config_h.exists() else "",
                       shutil.which("verilator"), verilator_version(), build_args,
                       shutil.which(os.environ.get("CXX", "g++")),
                       *(os.environ.get(v, "") for v in ("CXXFLAGS", "CPPFLAGS", "OPT_GLOBAL"))])
-    return RUNTIME_CACHE.resolve() / hashlib.sha256(key.encode()).hexdigest()[:16]
+    cache = Path(os.environ.get("GPF_VERILATOR_RUNTIME") or RUNTIME_CACHE)
+    return cache.resolve() / hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
 def _runtime_variables(cache: Path) -> dict[str, str]:
@@ -134,7 +157,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
             extra_env: dict[str, str] | None = None,
             template_dir: Path | None = None, build_root: Path = Path("build"),
             log_file: Path | None = None, verilator_opt: str | None = None,
-            gate: bool = False, netlist: Path | None = None) -> SimResult:
+            gate: bool = False, netlist: Path | None = None,
+            all_modules: bool = True) -> SimResult:
     """Generate the RTL, build it for `sim` and run the module's cocotb tests.
 
     `template_dir` and `build_root` let a test simulate mutated templates out of the way.
@@ -143,6 +167,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     VERILATOR_OPT): -O0 where the build costs more than the run.
     `gate`: simulate the module's synthesized netlist (gpf.synth.gate_netlist), or `netlist`
     if given, with the same testbench and model.
+    `all_modules=False`: generate the module (and those it uses) only, a tenth of the time: for
+    a build root no other run shares (a mutant's), as the manifest then lists that module only.
     """
     if module not in MODULES:
         raise ValueError(f"unknown module {module!r}: choose one of {', '.join(MODULES)}")
@@ -162,7 +188,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         seed = int.from_bytes(os.urandom(4), "little")
     config_dir = (build_root / cfg.name).resolve()
     # every module, so the manifest is whole whichever module runs (runs share the folder)
-    generated = generate(cfg, config_dir / "rtl", template_dir=template_dir or TEMPLATE_DIR)
+    generated = generate(cfg, config_dir / "rtl", template_dir=template_dir or TEMPLATE_DIR,
+                         **({} if all_modules else {"modules": [module]}))
     sources = generated.files[module]
     gate = gate or netlist is not None
     if gate:

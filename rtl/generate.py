@@ -7,6 +7,7 @@ from the same model objects the testbenches check against, so no constant is typ
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 from collections.abc import Callable
@@ -1159,14 +1160,19 @@ def modules_for(cfg: Config) -> list[str]:
 
 
 def _with_uses(names: list[str]) -> list[str]:
-    """`names` and every module they use, each once, used ones first."""
+    """`names` and every module they use or contain, each once, those first (a filter's file
+    list names its blocks' files: they are rendered with it)."""
     out: list[str] = []
     for name in names:
-        out += [n for n in _with_uses(list(MODULES[name].uses)) + [name] if n not in out]
+        inner = list(MODULES[name].uses) + list(MODULES[name].blocks)
+        out += [n for n in _with_uses(inner) + [name] if n not in out]
     return out
 
 
+@functools.lru_cache(maxsize=8)
 def _environment(template_dir: Path) -> jinja2.Environment:
+    """One per template folder: its compiled templates are kept for the next generate (a test
+    suite generates hundreds of times)."""
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(template_dir)),
         undefined=jinja2.StrictUndefined,

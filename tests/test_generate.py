@@ -42,6 +42,21 @@ def test_header_filelist_manifest(tmp_path: Path) -> None:
     assert (tmp_path / "config.toml").read_text() == Path("configs/uav.toml").read_text()
 
 
+@pytest.mark.parametrize("config", ["bot", "uav"])
+def test_one_module_alone_writes_its_whole_file_list(tmp_path: Path, config: str) -> None:
+    """generate(modules=[m]) writes every file m's .f names, and the same bytes as a whole
+    generate (a filter's contained blocks were once left out of the first)."""
+    cfg = load_config(f"configs/{config}.toml")
+    whole = generate(cfg, tmp_path / "all")
+    for name in whole.files:
+        alone = generate(cfg, tmp_path / name, modules=[name])
+        listed = (tmp_path / name / f"{name}.f").read_text().split()
+        assert listed == [p.name for p in alone.files[name]]
+        for fname in listed:
+            assert (tmp_path / name / fname).read_bytes() == \
+                (tmp_path / "all" / fname).read_bytes(), f"{name}: {fname}"
+
+
 def test_rom_in_rtl_is_the_model_lut(tmp_path: Path) -> None:
     """The coefficients the RTL holds are exactly the ones the model computes with."""
     cfg = load_config("configs/odd.toml")

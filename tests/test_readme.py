@@ -109,11 +109,17 @@ def _script(block: list[str], tier: str) -> str | None:
         for c in lines).replace("<clone>", str(REPO))
 
 
+# make test's runs are a few steps of 64 particles: a Verilator model at -O0 builds in half the
+# time and runs them as fast (gpf.sim.VERILATOR_OPT)
+QUICK_BUILDS = {"GPF_VERILATOR_OPT": "-O0"}
+
+
 def _run_blocks(tier: str, tmp_path: Path) -> str:
     """Each block's commands of this tier in a folder of its own (HOME: tmp_path); returns what
     they printed."""
     printed = ""
-    env = {**os.environ, "HOME": str(tmp_path), "PATH": f"{VENV_BIN}:{os.environ['PATH']}"}
+    env = {**os.environ, "HOME": str(tmp_path), "PATH": f"{VENV_BIN}:{os.environ['PATH']}",
+           **(QUICK_BUILDS if tier == QUICK else {})}
     for i, block in enumerate(readme_blocks()):
         script = _script(block, tier)
         if script is None:
@@ -162,12 +168,15 @@ def readme_sim_output() -> list[str]:
 
 @pytest.mark.sim
 @pytest.mark.slow
-@pytest.mark.xdist_group("gpf-bot-lanes1-verilator")   # test_sim_filter's build of bot
+# the clone's build/bot/verilator/gpf_bot: make regress's 50-step run of bot builds there too
+@pytest.mark.xdist_group("gpf-bot-lanes1-verilator")
 def test_readme_sim_output_is_what_gpf_run_prints(tmp_path: Path) -> None:
-    """In the clone, with make sim's options (--plot, --json), fewer particles."""
+    """In the clone (the replay line says make sim), with make sim's options (--plot, --json),
+    fewer particles."""
     run = subprocess.run([VENV_BIN / "gpf", "run", "--config", "bot", "--particles", "64",
                           "--plot", tmp_path / "plots", "--json", tmp_path / "sim-bot.json"],
-                         cwd=REPO, text=True, capture_output=True)
+                         cwd=REPO, text=True, capture_output=True,
+                         env={**os.environ, **QUICK_BUILDS})
     assert run.returncode == 0, run.stdout + run.stderr
     printed = run.stdout.splitlines()
     shown = readme_sim_output()

@@ -31,39 +31,67 @@ def waves_possible(sim: str) -> bool:
 APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}  # default, odd words
 
 
+# blocks of both applications whose uav RTL has parts of its own (a 7-state mean and Sigma, the
+# quaternion's norm, the covariance's two blocks): they run uav too; the other blocks of both
+# (grng, exp, sqrt, recip, cordic_atan2) differ between the applications in word widths only
+APP_SPECIFIC = {"sample_cond", "moments", "cholesky", "sigma_predict"}
+
 # blocks whose uav RTL has an ecp5 shape that odd (bot's words, ecp5) does not reach: the uav
 # configs are xc7, so these also run uav in its ecp5 shape
 UAV_ECP5_RUNS = {"propagate_uav", "weight_uav", "moments"}
 
+# the serial blocks, whose runs outlast their builds, build at -O1; the others at -O0, where the
+# build costs more than the slower run (gpf.sim.VERILATOR_OPT)
+RUN_BOUND = {"cholesky", "sigma_predict"}
+
+
+def block_matrix(name: str) -> tuple[list, list]:
+    """A block's (sim, config, lanes) runs: those of `make test` and the rest of the matrix
+    (`make regress`). `make test`: Verilator runs the application's default config at LANES 1
+    with every beat and waves, Icarus its odd config (odd words; bot's: ecp5, N = 1020) at
+    LANES 2 with waves and a fifth of the beats; a block of both applications with uav-only RTL
+    runs uav at LANES 2 on Verilator, and uav's ecp5 shape, where odd does not reach it, runs on
+    Verilator (both with a fifth of the beats: TEST_LEVEL=short). So every block runs on both
+    simulators (with waves), at both LANES, with odd words, in each application where its RTL
+    differs. `make regress`: the rest of the matrix (the default config at LANES 2, the odd one
+    at 1, the odd one on Verilator, the default on Icarus, uav on every block of both
+    applications) and every beat of the runs make test shortens on Verilator."""
+    block = BLOCKS[name]
+    default, odd = APP_CONFIGS[block.apps[0]]
+    two = 2 if block.laned else 1
+    quick = [("verilator", default, 1)]
+    if len(block.apps) > 1 and name in APP_SPECIFIC:
+        quick.append(("verilator", "uav", two))
+    if name in UAV_ECP5_RUNS:
+        quick.append(("verilator", "uav-familyecp5", 1))
+    quick.append(("icarus", odd, two))
+    rest = [("verilator", default, 2), ("verilator", odd, 2), ("verilator", odd, 1),
+            ("icarus", default, 1)]
+    if len(block.apps) > 1:
+        rest += [("verilator", "uav", 2), ("icarus", "uav_seed002", 2)]
+    if not block.laned:   # the same RTL at any LANES: LANES 1 only
+        rest = [(sim, config, 1) for sim, config, _ in rest]
+    rest = [r for i, r in enumerate(rest) if r not in quick and r not in rest[:i]]
+    return quick, rest
+
 
 def block_runs() -> list:
-    """(module, sim, config, lanes) for every block. `make test`: Verilator runs the default
-    config at LANES 1 and the odd one at 2, Icarus the default at 1 (with waves) and the odd one
-    at 2; a block of both applications also runs uav on Verilator and uav_seed002 on Icarus
-    (LANES 2), and its odd config on Icarus only in `make regress`: each simulator runs two
-    configs and both LANES of every block. `make regress` adds the rest of the Verilator
-    matrix: the default config at LANES 2, the odd one at 1."""
+    """(module, sim, config, lanes, level) for every block (block_matrix): `make test`'s runs,
+    then `make regress`'s, where the runs make test shortens run again with every beat."""
     runs = []
     for name, block in BLOCKS.items():
         if block.is_filter:   # the whole filters: tests/test_sim_filter.py
             continue
-        default, odd = APP_CONFIGS[block.apps[0]]
-        combos = [("verilator", default, 1), ("verilator", default, 2), ("verilator", odd, 1),
-                  ("verilator", odd, 2), ("icarus", default, 1), ("icarus", odd, 2)]
-        regress = {("verilator", default, 2), ("verilator", odd, 1)} if block.laned else set()
-        if len(block.apps) > 1:
-            combos += [("verilator", "uav", 2), ("icarus", "uav_seed002", 2)]
-            regress |= {("icarus", odd, 2), ("icarus", odd, 1)}
-        if name in UAV_ECP5_RUNS:
-            combos.append(("verilator", "uav-familyecp5", 1))
-        if not block.laned:   # the same RTL at any LANES: LANES 1 only
-            combos = sorted({(sim, config, 1) for sim, config, _ in combos})
-        for sim, config, lanes in combos:
+        quick, rest = block_matrix(name)
+        for run in quick + rest:
+            sim, config, lanes = run
             marks = [SIM_MARKS[sim]] if SIM_MARKS[sim] else []
-            if (sim, config, lanes) in regress:
-                marks.append(pytest.mark.regress)
-            runs.append(pytest.param(name, sim, config, lanes, marks=marks,
-                                     id=f"{name}-{config}-lanes{lanes}-{sim}"))
+            ident = f"{name}-{config}-lanes{lanes}-{sim}"
+            if run in quick and sim == "verilator" and run != quick[0]:
+                runs.append(pytest.param(name, *run, "short", marks=marks, id=f"{ident}-short"))
+            regress = run in rest or sim == "verilator" and run != quick[0]
+            runs.append(pytest.param(name, *run, "default", id=ident,
+                                     marks=[*marks, pytest.mark.regress] if regress else marks))
     return runs
 
 
@@ -72,16 +100,18 @@ def block_runs() -> list:
 ICARUS_LEVEL = "short"
 
 
-@pytest.mark.parametrize("module,sim,config,lanes", block_runs())
-def test_block(module: str, sim: str, config: str, lanes: int) -> None:
+@pytest.mark.parametrize("module,sim,config,lanes,level", block_runs())
+def test_block(module: str, sim: str, config: str, lanes: int, level: str) -> None:
     name, _, family = config.partition("-family")
     cfg = load_config(f"configs/{name}.toml",
                       {"filter.lanes": lanes, **({"filter.family": family} if family else {})})
-    waves = config == APP_CONFIGS[BLOCKS[module].apps[0]][0] and lanes == 1 and \
-        waves_possible(sim)
-    level = os.environ.get("TEST_LEVEL") or (ICARUS_LEVEL if sim == "icarus" else "default")
+    quick, _ = block_matrix(module)
+    # waves: make test's run of the default config on Verilator and its run on Icarus
+    waves = (sim, config, lanes) in (quick[0], quick[-1]) and waves_possible(sim)
+    level = os.environ.get("TEST_LEVEL") or (ICARUS_LEVEL if sim == "icarus" else level)
     result = run_sim(cfg, module, sim, waves=waves, seed=1000 + lanes,
                      log_file=Path("build") / cfg.name / f"{module}-{sim}.log",
+                     verilator_opt="-O1" if module in RUN_BOUND else "-O0",
                      extra_env={"TEST_LEVEL": level})
     assert result.passed, f"{result.failed}/{result.tests} failed: see {result.results_xml}"
     assert result.tests >= 6
@@ -288,7 +318,7 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     # TEST_LEVEL=short: each mutant was seen to fail at the default level too
     result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
                      template_dir=templates, build_root=tmp_path / "build",
-                     log_file=tmp_path / "sim.log",
+                     log_file=tmp_path / "sim.log", all_modules=False,
                      extra_env={"TEST_LEVEL": "short", "GPF_FAIL_FAST": "1"})
     assert result.tests > 0
     assert result.failed > 0, f"mutant {mutant} survived the {module} testbench"
