@@ -266,16 +266,21 @@ MUTANTS = {
     "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
                                "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
-    "cholesky-pivot-sub": ("cholesky", "cholesky_core.sv.j2", "assign lv0[{{ 3 * k + 1 }}] = ~(",
-                           "assign lv0[{{ 3 * k + 1 }}] = ("),
+    # a dot product's term with the wrong weight: the four-part shape's aL bH a bit too high
+    "cholesky-dot-term": ("cholesky", "cholesky_core.sv.j2",
+                          "lh_q[\" ~ k ~ \"]\", w + 1, acc_w) }} <<< LO;",
+                          "lh_q[\" ~ k ~ \"]\", w + 1, acc_w) }} <<< (LO + 1);"),
+    # the dot product's first product added where it is subtracted (the tree's S_aj node)
+    "cholesky-dot-sub": ("cholesky", "cholesky_core.sv.j2", '{{ "-" if t == 0 else "+" }}',
+                         '{{ "-" if t == 0 and v > 1 else "+" }}'),
     # the same two on the xc7 shape (a product as a bL + a bH 2^LO): the pivot's a aH a LSB
-    # too high, a dot product's a bL added
+    # too high, a dot product's a bH a bit too low
     "cholesky-pivot-square-xc7": ("cholesky", "cholesky_core.sv.j2",
-                                  "2 * w - lo, acc_w) }} <<< LO;",
-                                  "2 * w - lo, acc_w) }} <<< (LO + 1);"),
-    "cholesky-pivot-sub-xc7": ("cholesky", "cholesky_core.sv.j2",
-                               "assign lv0[{{ 2 * k + 1 }}] = ~(",
-                               "assign lv0[{{ 2 * k + 1 }}] = ("),
+                                  "sbh_q\", 2 * w - lo, acc_w) }} <<< LO;",
+                                  "sbh_q\", 2 * w - lo, acc_w) }} <<< (LO + 1);"),
+    "cholesky-dot-term-xc7": ("cholesky", "cholesky_core.sv.j2",
+                              "pbh_q[\" ~ k ~ \"]\", 2 * w - lo, acc_w) }} <<< LO;",
+                              "pbh_q[\" ~ k ~ \"]\", 2 * w - lo, acc_w) }} <<< (LO - 1);"),
     # AXI4-Stream protocol (tb/stream.py's checks): tdata or tlast different only while a beat
     # is offered and not taken, right again at the handshake, so every value checked is right
     "cholesky-stall-data": ("cholesky", "cholesky.sv.j2", "assign m_axis_tdata = m_data_q;",
@@ -292,7 +297,7 @@ MUTANTS = {
 
 # mutants that only a config other than the module's first application's catches: the
 # 18 x 18 parts are the ecp5 shape (odd), bot's is xc7's
-MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-pivot-sub": "odd",
+MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-dot-term": "odd",
                                  "moments-quaternion-square": "uav", "moments-root-digit": "uav",
                                  "moments-wdx-split": "odd"}
 
