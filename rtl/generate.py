@@ -958,8 +958,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
     the rows' dot products Sigma_aj - sum_k<j L_ak L_jk into a pipeline of P clocks (operands,
     products, an adder tree), c = n-1-j row j+1's partial sum for the next pivot; c = PV floors
     the pivot and loads the root; SQ clocks of 2 root bits (radix 4, three trial subtractions
-    in parallel); one clock rounds L_jj and forms every row's D = 2 num + L_jj beside it; one
-    takes |D|; QS clocks of 2
+    in parallel); one clock rounds L_jj; one forms every row's 2 num + L_jj; QS clocks of 2
     quotient bits of floor(|2 num + L_jj| / 2 L_jj) in one divider per row (radix 4); one
     writes the rows: L_ij = round(num / L_jj), saturated. The last column stops after L_jj.
     """
@@ -994,9 +993,8 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
         terms = 1 + (size - 1) * {"whole": 1, "two": 2, "four": 3}[parts]
         levels = max(1, math.ceil(math.log2(terms)))
         p = 2 + levels                          # operands, products, the adder tree
-        # L_jj when the root is done and the last row's dot product is in (its D = 2 num + L_jj
-        # formed in the same clock)
-        c_ljj = max(CHOL_PIVOT_CLOCKS + sq + 2, p + size - 1)
+        # L_jj when the root is done and the last row's dot product is in
+        c_ljj = max(CHOL_PIVOT_CLOCKS + sq + 2, p + size - 2)
         c_end = c_ljj + qs + 2                  # the rows' L_ij
         clocks = [c_end + 1] * (size - 1) + [c_ljj + 1]
         cores.append({"start": start, "n": size, "p": p, "levels": levels,
