@@ -490,7 +490,7 @@ def cholesky_view(cfg: Config, sim: str) -> list[Group]:
                   signed=True, frac_bits=2 * f0),
             _bit(f"{core}.floored_q", "floored"),
             Trace(f"{core}.root_q", w - 1, 0, label="isqrt(4 d)", frac_bits=f0 + 1),
-            Trace(f"{core}.den_q", w - 1, 0, label="L_jj", frac_bits=f0),
+            Trace(f"{core}.den0_q", w - 1, 0, label="L_jj", frac_bits=f0),
             _bit(f"{core}.sat_q", "SAT so far"), _bit(f"{core}.notpd_q", "NOT_PD so far"),
         ]),
     ]

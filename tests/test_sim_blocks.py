@@ -124,15 +124,18 @@ def test_block(module: str, sim: str, config: str, lanes: int, level: str) -> No
 MUTANTS = {
     "grng-lfsr-xor": ("grng", "grng_lfsr258.sv.j2", "uniform_d = uniform_d ^ step[c];",
                  "uniform_d = uniform_d | step[c];"),
-    "grng-horner-add": ("grng", "grng_icdf.sv.j2", "+ {{ sext('c0_4a_q'",
-                        "- {{ sext('c0_4a_q'"),
-    "grng-rounding": ("grng", "grng_icdf.sv.j2", "(C2W+XW+1)'(1 <<< (XW-1))",
-                      "(C2W+XW+1)'(1 <<< (XW-2))"),
+    "grng-horner-add": ("grng", "grng_icdf.sv.j2", "+ {{ sext(\"$signed({c0_4a_q",
+                        "- {{ sext(\"$signed({c0_4a_q"),
+    # c2 x truncated, not rounded half up
+    "grng-rounding": ("grng", "grng_icdf.sv.j2", "{c1_3a_q, 1'b1,", "{c1_3a_q, 1'b0,"),
     "grng-backpressure": ("grng", "grng.sv.j2", "assign take = m_axis_tvalid && m_axis_tready;",
                           "assign take = m_axis_tvalid;"),
     # half the FIFO: steady flow still at full rate, a restart after a stall not
     "grng-fifo-depth": ("grng", "grng.sv.j2", "localparam int FIFO_LOG2 = {{ fifo_log2 }};",
                         "localparam int FIFO_LOG2 = {{ fifo_log2 - 1 }};"),
+    # a lane's copy of the sources' enable wrong while a seed loads (checked against run_d)
+    "grng-lane-run": ("grng", "grng.sv.j2", "(s_seed_tvalid ? last_l_q : first_l_q)",
+                      "first_l_q"),
     "grng-credit": ("grng", "grng.sv.j2", "held_q <= (FIFO_LOG2+1)'($unsigned(DEPTH - 4))",
                     "held_q <= (FIFO_LOG2+1)'($unsigned(DEPTH - 1))"),
     "exp-interp-round": ("exp", "exp_lane.sv.j2", "(SW+RB+1)'(1 <<< (RB-1))",
@@ -243,6 +246,9 @@ MUTANTS = {
     "sigma_predict-saturation": ("sigma_predict", "sigma_predict.sv.j2",
                                  "assign o{{ loop.index0 }} = !c_fits_q",
                                  "assign o{{ loop.index0 }} = 1'b0 && !c_fits_q"),
+    # every term's partial sum written to its entry, the last entry's first one marks it done
+    "sigma_predict-entry-write": ("sigma_predict", "sigma_predict.sv.j2",
+                                  "b_on_q && b_final_q && b_dest_q ==", "b_on_q && b_dest_q =="),
     "sigma_predict-first-term": ("sigma_predict", "sigma_predict.sv.j2",
                                  "({{ pre }}first_q ? {{ pre }}init_q : acc_q)", "(acc_q)"),
     # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
@@ -263,6 +269,10 @@ MUTANTS = {
     # the next pivot's L_j+1,j^2 with its cross term 2 aH aL 2^17 counted once
     "cholesky-pivot-square": ("cholesky", "cholesky_core.sv.j2",
                               "<<< {{ lo + 1 }});", "<<< {{ lo }});"),
+    # 2 num + L_jj's high part not carried into from its low W + 1 bits
+    "cholesky-dnum-carry": ("cholesky", "cholesky_core.sv.j2",
+                            "dlo[{{ r }}][W+1] ? nhi1_q[{{ r }}] : nhi_q[{{ r }}]",
+                            "nhi_q[{{ r }}]"),
     "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
                                "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
@@ -302,6 +312,16 @@ MUTANT_CONFIG: dict[str, str] = {"cholesky-pivot-square": "odd", "cholesky-dot-t
                                  "moments-wdx-split": "odd"}
 
 
+def run_mutant(mutant: str, *args, log_file: Path, **kwargs):
+    """run_sim on a mutant's RTL; None when a simulation-only check of the RTL stopped the
+    simulator ($fatal): caught, if its log says so (a mutant that does not build must not count)."""
+    try:
+        return run_sim(*args, log_file=log_file, **kwargs)
+    except RuntimeError:
+        assert "FATAL" in log_file.read_text(), f"mutant {mutant} did not run"
+        return None
+
+
 def mutated_templates(tmp_path: Path, mutant: str, template: str, old: str, new: str) -> Path:
     """A copy of the templates with `old` replaced by `new` (once) in `template`."""
     templates = tmp_path / "templates"
@@ -321,9 +341,11 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     # the module's application, or the config where the mutant is not equivalent
     config = MUTANT_CONFIG.get(mutant, "bot" if "bot" in BLOCKS[module].apps else "uav")
     # TEST_LEVEL=short: each mutant was seen to fail at the default level too
-    result = run_sim(load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
-                     template_dir=templates, build_root=tmp_path / "build",
-                     log_file=tmp_path / "sim.log", all_modules=False,
-                     extra_env={"TEST_LEVEL": "short", "GPF_FAIL_FAST": "1"})
+    result = run_mutant(mutant, load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
+                        template_dir=templates, build_root=tmp_path / "build",
+                        log_file=tmp_path / "sim.log", all_modules=False,
+                        extra_env={"TEST_LEVEL": "short", "GPF_FAIL_FAST": "1"})
+    if result is None:
+        return
     assert result.tests > 0
     assert result.failed > 0, f"mutant {mutant} survived the {module} testbench"
