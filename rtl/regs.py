@@ -45,7 +45,7 @@ def regs_name(app: str) -> str:
     return f"gpf_{app}_regs"
 
 
-def _edit(text: str, name: str, edits: list[tuple[str, str, int]]) -> str:
+def _edit(text: str, name: str, edits: list[tuple[str, str, int]] = EDITS) -> str:
     for pattern, repl, least in edits:
         text, count = re.subn(pattern, repl, text)
         if count < least:
