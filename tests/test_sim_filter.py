@@ -236,8 +236,8 @@ FILTER_MUTANTS = {
     # a register slice between blocks loses the beat it holds in its skid under backpressure
     "slice-skid": ("gpf_slice", "gpf_slice.sv.j2", "m_data <= skid_q ? skid_data_q : s_data;",
                    "m_data <= s_data;", None, {}, "test_stalls"),
-    # the draws FIFO too shallow for sample_cond's beats: unchecked (its flags are not read),
-    # it overwrites a particle's process draws, and only the values show it
+    # the draws FIFO too shallow for sample_cond's beats: unchecked (CHECKED 0), it overwrites a
+    # particle's process draws; the simulation-only check of its flags stops it ($fatal)
     "draws-fifo-depth": ("gpf_bot", "gpf.sv.j2", ".DEPTH_LOG2({{ fifo_depth_log2 }})",
                          ".DEPTH_LOG2(2)", None, {}),
     # AXI4-Stream protocol (tb/stream.py's checks): the estimate's LSB flipped only while m_est
