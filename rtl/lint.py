@@ -1,4 +1,5 @@
-"""Lint every generated module: Verilator -Wall, slang (pyslang) and Icarus -g2012.
+"""Lint every generated module: Verilator -Wall, slang (pyslang, with its analysis pass) and
+Icarus -g2012.
 
 No waivers: a warning from any of the three is a lint failure.
 """
@@ -22,18 +23,45 @@ def verilator_lint(files: list[Path], top: str) -> str:
     return (run.stdout + run.stderr).strip() if run.returncode else ""
 
 
+# slang's analysis pass (after elaboration) finds what a compile cannot: a signal driven from two
+# processes or by two continuous assignments, a signal never driven, one declared or set and never
+# read, an unused port. Every diagnostic of these groups is an error; a signal unused by design
+# says so where it is declared, `(* maybe_unused *)` (beside Verilator's lint_off UNUSEDSIGNAL).
+SLANG_ANALYSIS_WARNINGS = ["default", "unused", "error"]
+
+
 def slang_lint(files: list[Path], top: str) -> str:
     from pyslang import DiagnosticEngine, ast, syntax
 
     compilation = ast.Compilation()
     for path in files:
         compilation.addSyntaxTree(syntax.SyntaxTree.fromFile(str(path)))
-    diags = compilation.getAllDiagnostics()
-    tops = [inst.name for inst in compilation.getRoot().topInstances]
+    diags = compilation.getAllDiagnostics()   # every one of them, as before the analysis
     text = DiagnosticEngine.reportAll(compilation.sourceManager, diags).strip() if diags else ""
+    tops = [inst.name for inst in compilation.getRoot().topInstances]
     if top not in tops:
         text += f"\nslang: top module {top} not elaborated (tops: {tops})"
-    return text.strip()
+    return (text + "\n" + slang_analysis(compilation)).strip()
+
+
+def slang_analysis(compilation) -> str:
+    """The analysis pass's findings on an elaborated compilation, as slang prints them."""
+    from pyslang import DiagnosticEngine, TextDiagnosticClient, analysis
+
+    options = analysis.AnalysisOptions()
+    options.flags = analysis.AnalysisFlags.CheckUnused
+    manager = analysis.AnalysisManager(options)
+    compilation.freeze()   # the analysis requires it (slang's driver does the same)
+    manager.analyze(compilation)
+    compilation.unfreeze()
+    engine = DiagnosticEngine(compilation.sourceManager)
+    client = TextDiagnosticClient()
+    client.showColors(False)
+    engine.addClient(client)
+    engine.setWarningOptions(SLANG_ANALYSIS_WARNINGS)
+    for diag in manager.getDiagnostics():
+        engine.issue(diag)
+    return client.getString().strip()
 
 
 def icarus_compile(files: list[Path], top: str) -> str:

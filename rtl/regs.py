@@ -26,6 +26,15 @@ from systemrdl.node import RootNode
 
 # (PeakRDL's text, ours, how many times at least): an edit that stops matching fails generation
 EDITS = [(r"\bstruct \{", "struct packed {", 1), (r"\bautomatic logic\b", "logic", 0)]
+# What PeakRDL declares and never reads, by design, marked so for slang's analysis (rtl/lint.py)
+# as the banner's lint_off does for Verilator: the AXI4-Lite PROT inputs, its address and access
+# checks (it has none) and error decode, the package's size constants
+UNUSED = "(* maybe_unused *) "
+UNUSED_EDITS = {
+    "": [(r"(input wire \[2:0\] s_axil_a[wr]prot\b)", UNUSED + r"\1", 2),
+         (r"(logic (decoded_err|is_valid_addr|is_valid_rw);)", UNUSED + r"\1", 3)],
+    "_pkg": [(r"(localparam \w+_(DATA_WIDTH|MIN_ADDR_WIDTH|SIZE) =)", UNUSED + r"\1", 3)],
+}
 
 
 ICARUS_GAP = "Icarus 11 cannot elaborate the register block's nested packed structs"
@@ -36,8 +45,8 @@ def regs_name(app: str) -> str:
     return f"gpf_{app}_regs"
 
 
-def _edit(text: str, name: str) -> str:
-    for pattern, repl, least in EDITS:
+def _edit(text: str, name: str, edits: list[tuple[str, str, int]] = EDITS) -> str:
+    for pattern, repl, least in edits:
         text, count = re.subn(pattern, repl, text)
         if count < least:
             raise ValueError(f"{name}: PeakRDL's output changed: no {pattern!r} to edit")
@@ -76,6 +85,7 @@ def register_files(env: jinja2.Environment, context: dict) -> dict[str, str]:
     banner = (f"// Generated from {context['config_file']} by `gpf generate`: PeakRDL-regblock's "
               f"output of {name}.rdl, structs packed (rtl/regs.py).\n`timescale 1ns / 1ps\n"
               "/* verilator lint_off UNUSEDSIGNAL */\n/* verilator lint_off UNUSEDPARAM */\n")
-    for sv in (f"{name}_pkg.sv", f"{name}.sv"):
-        texts[sv] = banner + _edit(texts[sv], sv)
+    for suffix, unused_edits in UNUSED_EDITS.items():
+        sv = f"{name}{suffix}.sv"
+        texts[sv] = banner + _edit(texts[sv], sv, EDITS + unused_edits)
     return texts

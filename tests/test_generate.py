@@ -186,3 +186,7 @@ def test_register_block_edits_must_match() -> None:
     assert "struct packed {" in _edit("typedef struct {\n logic a;\n} t;", "x.sv")
     with pytest.raises(ValueError, match="PeakRDL's output changed"):
         _edit("typedef struct unpacked_now {\n logic a;\n} t;", "x.sv")
+    # the declarations marked unused by design: one PROT input left of two is a changed output
+    from gpf.rtl.regs import UNUSED_EDITS
+    with pytest.raises(ValueError, match="PeakRDL's output changed"):
+        _edit("input wire [2:0] s_axil_awprot,\n", "x.sv", UNUSED_EDITS[""])

@@ -10,6 +10,7 @@ import json
 import os
 import random
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -235,8 +236,8 @@ FILTER_MUTANTS = {
     # a register slice between blocks loses the beat it holds in its skid under backpressure
     "slice-skid": ("gpf_slice", "gpf_slice.sv.j2", "m_data <= skid_q ? skid_data_q : s_data;",
                    "m_data <= s_data;", None, {}, "test_stalls"),
-    # the draws FIFO too shallow for sample_cond's beats: unchecked (its flags are not read),
-    # it overwrites a particle's process draws, and only the values show it
+    # the draws FIFO too shallow for sample_cond's beats: unchecked (CHECKED 0), it overwrites a
+    # particle's process draws; the simulation-only check of its flags stops it ($fatal)
     "draws-fifo-depth": ("gpf_bot", "gpf.sv.j2", ".DEPTH_LOG2({{ fifo_depth_log2 }})",
                          ".DEPTH_LOG2(2)", None, {}),
     # AXI4-Stream protocol (tb/stream.py's checks): the estimate's LSB flipped only while m_est
@@ -322,41 +323,57 @@ def test_mutant_fails_the_ip(tmp_path: Path, mutant: str) -> None:
     assert result.failed == 1, f"mutant {mutant} of gpf_bot_axi survived its tests"
 
 
-CAMPAIGN_PARTICLES = 10_000_000
+# The stall campaign: GPF_CAMPAIGN_PARTICLES particles (make regress CAMPAIGN_PARTICLES=n), or
+# 10^7 at TEST_LEVEL=long, split in pieces (conftest.py: two a shard of make regress SHARDS=k)
+CAMPAIGN_PARTICLES = int(os.environ.get("GPF_CAMPAIGN_PARTICLES", "0")) or (
+    10_000_000 if os.environ.get("TEST_LEVEL") == "long" else 0)
 CONFIGS = ("bot", "odd", "uav", "uav_seed002")
 
 
-@pytest.mark.skipif(os.environ.get("TEST_LEVEL") != "long", reason="TEST_LEVEL=long only")
-@pytest.mark.parametrize("shard", [0, 1])
-def test_stall_campaign(tmp_path: Path, shard: int) -> None:
+@pytest.mark.campaign
+@pytest.mark.skipif(not CAMPAIGN_PARTICLES,
+                    reason="GPF_CAMPAIGN_PARTICLES (make regress CAMPAIGN_PARTICLES=) or "
+                           "TEST_LEVEL=long only")
+def test_stall_campaign(tmp_path: Path, campaign_piece: tuple[int, int]) -> None:
     """50 % random stalls on every stream of the whole filter, random configs (config, LANES,
-    N, steps, seed, drawn from a seeded generator): nothing lost, duplicated or reordered,
-    every particle bit-exact. Two shards (pytest -n 2) of half the particle checks each."""
-    rng = random.Random(f"campaign-{shard}")
-    checked, runs = 0, 0
-    log = Path("build") / f"stall-campaign-{shard}.txt"
-    log.parent.mkdir(exist_ok=True)
-    log.write_text("")
-    while checked < CAMPAIGN_PARTICLES // 2:
+    N, steps, seed, drawn from a generator seeded by the piece): nothing lost, duplicated or
+    reordered, every particle bit-exact. Piece j of P checks ceil(CAMPAIGN_PARTICLES / P)
+    particles and writes its count to build/campaign/piece-j-of-P.json."""
+    piece, pieces = campaign_piece
+    seed_text = f"campaign-{piece}-of-{pieces}"
+    rng = random.Random(seed_text)
+    budget = -(-CAMPAIGN_PARTICLES // pieces)
+    summary = {"piece": piece, "pieces": pieces, "seed": seed_text, "budget": budget,
+               "particles_checked": 0, "mismatches": 0, "runs": 0, "failed_runs": 0,
+               "seconds": 0.0}
+    report = Path("build") / "campaign" / f"piece-{piece}-of-{pieces}.json"
+    report.parent.mkdir(parents=True, exist_ok=True)
+    print(f"stall campaign piece {piece} of {pieces}: seed {seed_text!r}, {budget} particles",
+          flush=True)
+    start = time.monotonic()
+    while summary["particles_checked"] < budget:
         config, lanes = rng.choice(CONFIGS), rng.choice((1, 2, 4))
         cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes})
         # big runs: a Verilator build costs as much as checking ~150,000 particles
         particles = lanes * rng.randint(cfg.particles // lanes // 4, cfg.particles // lanes)
         steps = min(250, 500_000 // particles)
         seed = rng.randrange(1 << 30)
+        run_dir = tmp_path / str(summary["runs"])
         result, res = filter_run(config, "verilator", lanes, steps, particles, seed,
-                                 testcase="test_filter", build_root=tmp_path / str(runs),
-                                 stall=0.5)
+                                 testcase="test_filter", build_root=run_dir, stall=0.5)
+        summary["runs"] += 1
+        summary["particles_checked"] += res.get("particles_checked", 0)
+        summary["mismatches"] += res.get("mismatches", 0)
+        summary["failed_runs"] += not result.passed
+        summary["seconds"] = round(time.monotonic() - start, 1)
+        # written after every run, a failed one too: CI sums what each piece got through
+        report.write_text(json.dumps(summary, indent=1) + "\n")
+        print(f"campaign piece {piece} of {pieces}: run {summary['runs']} {cfg.name} "
+              f"N={particles} x {steps} steps seed {seed}: {res.get('particles_checked', 0)} "
+              f"particles, total {summary['particles_checked']}", flush=True)
         check_run(result, res, steps, particles, lanes, tests=1, stalled=True)
-        checked += res["particles_checked"]
-        runs += 1
-        line = (f"campaign shard {shard}: run {runs} {cfg.name} N={particles} x {steps} steps "
-                f"seed {seed}: {res['particles_checked']} particles, total {checked}")
-        print(line, flush=True)
-        with log.open("a") as f:   # pytest -n hides prints: the count goes to a file too
-            f.write(line + "\n")
-        shutil.rmtree(tmp_path / str(runs - 1), ignore_errors=True)
-    line = f"stall campaign shard {shard}: {checked} particles checked in {runs} runs, 0 mismatches"
-    print(line)
-    with log.open("a") as f:
-        f.write(line + "\n")
+        shutil.rmtree(run_dir, ignore_errors=True)
+    rate = summary["particles_checked"] / max(summary["seconds"], 1e-9)
+    print(f"stall campaign piece {piece} of {pieces}: {summary['particles_checked']} particles "
+          f"checked in {summary['runs']} runs, {summary['seconds']} s ({rate:.0f} a second, "
+          "builds included), 0 mismatches")
