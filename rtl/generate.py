@@ -992,7 +992,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
         # S_aj and the products' terms in the adder tree ("four": {hh, ll} one term)
         terms = 1 + (size - 1) * {"whole": 1, "two": 2, "four": 3}[parts]
         levels = max(1, math.ceil(math.log2(terms)))
-        p = 3 + levels                          # operands twice, products, the adder tree
+        p = 4 + levels                          # indices, operands twice, products, the tree
         # L_jj when the root is done and the last row's dot product is in
         c_ljj = max(CHOL_PIVOT_CLOCKS + sq + 2, p + size - 2)
         c_end = c_ljj + qs + 2                  # the rows' L_ij
