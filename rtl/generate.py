@@ -945,6 +945,7 @@ def diagonal_blocks(n: int, pairs: list[tuple[int, int]]) -> list[tuple[int, int
 
 
 CHOL_PIVOT_CLOCKS = 3   # L_j,j-1 -> its square's parts -> two sums -> the pivot, registered
+# (>= 3: the pivot floor, compared at c = 1 and selected at c = 2, is read at this clock)
 
 
 def cholesky_context(cfg: Config) -> dict[str, Any]:
