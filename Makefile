@@ -55,7 +55,7 @@ help:
 	@echo "             STEPS: the config's own by default (bot 50, uav 200)"
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
-	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=]"
+	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
 	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
@@ -87,7 +87,7 @@ synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)
 
 timing: $(STAMP)
-	$(BIN)/gpf timing $(HW_ARGS)
+	$(BIN)/gpf timing $(HW_ARGS) $(if $(SEED),--seed $(SEED))
 
 bench: $(STAMP)
 	$(BIN)/python -m gpf.bench

@@ -30,6 +30,7 @@ EXIT_USAGE = 2
 EXIT_BUG = 3             # an internal error (a traceback with --debug)
 BUILD = Path("build")
 SEED_MAX = (1 << 32) - 1        # cocotb's and the scenarios' seeds (runs print 32-bit ones)
+NEXTPNR_SEED_MAX = (1 << 31) - 1   # nextpnr's --seed is a C int
 STEPS_MAX = 100_000             # as filter.steps
 PARTICLES_MAX = 1 << 16         # as filter.particles
 SAMPLES_MAX = 100_000_000
@@ -574,6 +575,7 @@ def cmd_timing(args: argparse.Namespace) -> int:
 
     if not 1 <= args.freq <= 1000:
         raise UsageError(f"--freq {args.freq:g}: must lie in [1, 1000] MHz")
+    _range("--seed", args.seed, 1, NEXTPNR_SEED_MAX)
     cfg, module = _hw_target(args)
     _build_dir(cfg)
     yosys_command()
@@ -584,7 +586,7 @@ def cmd_timing(args: argparse.Namespace) -> int:
     try:
         t = place_and_route(cfg, module, target_mhz=args.freq,
                             timeout=args.timeout * 60 if args.timeout else None,
-                            dsp_registers=not args.fabric_dsp_registers)
+                            seed=args.seed, dsp_registers=not args.fabric_dsp_registers)
     except SynthError as exc:
         print(f"gpf timing: FAILED: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILED
@@ -723,6 +725,9 @@ def build_parser() -> Parser:
     p.add_argument("--module", help="block (gpf list); default: the config's whole filter")
     p.add_argument("--freq", type=float, default=125.0, help="target clock, MHz (default 125)")
     p.add_argument("--timeout", type=float, help="give up after this many minutes")
+    p.add_argument("--seed", type=int, default=1,
+                   help="nextpnr's placement seed (default 1; another seed places in "
+                   "build/<config>/timing/<module>-seed<n>: several run side by side)")
     p.add_argument("--fabric-dsp-registers", action="store_true",
                    help="leave the multipliers' registers in the fabric, as synth_ecp5 maps "
                    "them (default: moved into each MULT18X18D, as a vendor flow does)")

@@ -109,7 +109,9 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                     seed: int = 1, dsp_registers: bool = True) -> Timing:
     top = MODULES[module].top
     cfg = for_family(cfg, "ecp5")     # the multipliers shaped for the MULT18X18D
-    folder = (build_root / cfg.name / "timing" / module).resolve()
+    # a placement seed other than the default places in a folder of its own: seeds run side by side
+    folder = (build_root / cfg.name / "timing" / (module if seed == 1 else f"{module}-seed{seed}")
+              ).resolve()
     netlist, report, log = folder / "netlist.json", folder / "report.json", folder / "nextpnr.log"
     start = time.monotonic()
     run_yosys(read_sources(rtl_files(cfg, module, build_root), folder)

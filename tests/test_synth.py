@@ -127,7 +127,8 @@ def test_weight_netlist_equals_the_model(tmp_path: Path) -> None:
 def test_timing_reports_fmax_and_the_critical_path(tmp_path: Path) -> None:
     from gpf.timing import place_and_route
 
-    t = place_and_route(load_config("configs/bot.toml"), BLOCK, build_root=tmp_path)
+    t = place_and_route(load_config("configs/bot.toml"), BLOCK, build_root=tmp_path, seed=2)
+    assert t.log.parent.name == f"{BLOCK}-seed2"   # another seed, another folder: side by side
     assert 1 < t.fmax_mhz < 1000 and t.path_from != "?.?" and t.path_to != "?.?"
     assert t.utilisation["TRELLIS_FF"][0] > 0
     assert t.dsp_registers["dsps"] == t.utilisation["MULT18X18D"][0] > 0   # each one seen
@@ -168,6 +169,7 @@ def test_a_design_over_the_device_is_refused_before_placement() -> None:
     (["synth", "--module", "nope"], "unknown"),
     (["synth", "--config", "bot", "--module", "propagate_uav"], "uav"),
     (["timing", "--module", "exp", "--freq", "0"], "--freq"),
+    (["timing", "--module", "exp", "--seed", "0"], "--seed"),
 ])
 def test_synth_and_timing_refuse_bad_input(argv: list[str], words: str, capsys) -> None:
     assert main(argv) == 2
