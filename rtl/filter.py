@@ -96,3 +96,15 @@ def axi_context(cfg: Config) -> dict[str, Any]:
     return ctx | {f"{name}_bytes": -(-w // 8) for name, w in widths.items()} | {
         "regs": regs_name(ctx["app"]), "regs_aw": ADDR_W, "clock_mhz": EXAMPLE_CLOCK_MHZ,
         "part_contexts": {}}
+
+
+HARNESS_STEPS_MAX = 1 << 14   # step beats the harness holds: longer runs take cocotb's drivers
+HARNESS_DIR = "tb"            # beside the IP's files, outside every file list
+
+
+def harness_context(cfg: Config) -> dict[str, Any]:
+    """gpf_<app>_harness (simulation only): the core's stream widths, the stimulus depth and the
+    clock it runs (tb/harness.py's CLOCK_NS of 10 ns)."""
+    ctx = filter_context(cfg)
+    return ctx | {"core": f"gpf_{ctx['app']}", "cond_w": ctx["lanes"] * ctx["cond_lane_w"],
+                  "steps_max": HARNESS_STEPS_MAX, "half_period_ns": 5, "part_contexts": {}}

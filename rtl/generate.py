@@ -63,6 +63,9 @@ class Module:
     made: Callable[[jinja2.Environment, dict[str, Any]], dict[str, str]] | None = None
     icarus_gap: str | None = None   # why Icarus cannot run it (None: it can)
     simulated: bool = True          # False: a top for synthesis only (no testbench)
+    # a testbench harness wrapping the top (rendered from gpf_harness.sv.j2 into tb/, in no file
+    # list): the simulation's toplevel, so that the test's stream work runs in the simulator
+    harness: str | None = None
 
     @property
     def is_filter(self) -> bool:
@@ -1138,7 +1141,8 @@ MODULES: dict[str, Module] = {
         f"gpf_{app}", ("gpf_grng", "gpf_fifo", "gpf_slice", "ctrl", f"gpf_{app}"), filter_context,
         uses=("grng",), apps=(app,), blocks=("sample_cond", f"propagate_{app}", f"weight_{app}",
                              "moments", "cholesky", "sigma_predict"),
-        templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf")
+        templates=(("gpf_grng", "grng"), (f"gpf_{app}", "gpf")), testbench="gpf.tb.gpf.test_gpf",
+        harness=f"gpf_{app}_harness")
        for app in ("bot", "uav")},
     # the whole filters as IP: the core behind AXI4-Lite registers (PeakRDL) and byte-wide streams
     **{f"gpf_{app}_axi": Module(
@@ -1191,6 +1195,7 @@ class Generated:
     out_dir: Path
     files: dict[str, list[Path]]  # module -> its SystemVerilog files, dependencies first
     manifest: dict[str, Any]
+    harnesses: dict[str, Path] = dataclasses.field(default_factory=dict)  # module -> its harness
 
 
 def default_out_dir(cfg: Config) -> Path:
@@ -1211,6 +1216,7 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     regenerate = regenerate_command(cfg)
     texts: dict[str, str] = {}
     files: dict[str, list[Path]] = {}
+    harnesses: dict[str, Path] = {}
     manifest: dict[str, Any] = {
         "config": {"name": cfg.name, "file": config_file},
         "app": cfg.app,
@@ -1237,6 +1243,14 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
                 regenerate=regenerate, **part_context)
         files[name] = [out_dir / f"{part}.sv" for part in module.files()]
         texts[f"{name}.f"] = "".join(f"{part}.sv\n" for part in module.files())
+        if module.harness:
+            from gpf.rtl.filter import HARNESS_DIR, harness_context
+
+            harness = f"{HARNESS_DIR}/{module.harness}.sv"
+            texts[harness] = env.get_template("gpf_harness.sv.j2").render(
+                module=module.harness, config_file=config_file, config_name=cfg.name,
+                regenerate=regenerate, **harness_context(cfg))
+            harnesses[name] = out_dir / harness
         manifest["modules"][name] = {
             "top": module.top,
             "files": [f"{part}.sv" for part in module.files()],
@@ -1254,7 +1268,8 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
     out_dir.mkdir(parents=True, exist_ok=True)
     for fname, text in texts.items():
         path = out_dir / fname
+        path.parent.mkdir(parents=True, exist_ok=True)
         if not path.exists() or path.read_text() != text:
             # atomic: simulations of other modules may be reading this folder right now
             atomic_write_text(path, text)
-    return Generated(out_dir, files, manifest)
+    return Generated(out_dir, files, manifest, harnesses)

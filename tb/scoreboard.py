@@ -34,9 +34,16 @@ def unpack(words: list[int], fields: list[Field], lanes: int,
     nbytes = max(1, (total + 7) // 8)
     raw = np.frombuffer(b"".join(w.to_bytes(nbytes, "little") for w in words),
                         dtype=np.uint8).reshape(len(words), nbytes)
-    bits = np.unpackbits(raw, axis=1, bitorder="little")
-    out = {f.name: np.zeros((len(words), lanes), dtype=np.int64) for f in fields}
-    out.update({f.name: np.zeros((len(words), 1), dtype=np.int64) for f in beat_fields})
+    return unpack_bits(np.unpackbits(raw, axis=1, bitorder="little"), fields, lanes,
+                       beat_fields)
+
+
+def unpack_bits(bits: np.ndarray, fields: list[Field], lanes: int,
+                beat_fields: list[Field] | tuple[Field, ...] = ()) -> dict[str, np.ndarray]:
+    """unpack() from the words as a bit matrix, (beats, bits) LSB first."""
+    out = {f.name: np.zeros((len(bits), lanes), dtype=np.int64) for f in fields}
+    out.update({f.name: np.zeros((len(bits), 1), dtype=np.int64) for f in beat_fields})
+    lane_w = sum(f.fmt.width for f in fields)
     groups = [(lane, lane * lane_w, fields) for lane in range(lanes)]
     groups.append((0, lanes * lane_w, list(beat_fields)))
     for lane, offset, group in groups:
@@ -45,6 +52,56 @@ def unpack(words: list[int], fields: list[Field], lanes: int,
             assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
             weights = np.left_shift(np.int64(1), np.arange(width, dtype=np.int64))
             value = bits[:, offset:offset + width].astype(np.int64) @ weights
+            if f.fmt.signed:
+                value = np.where(value >> (width - 1) != 0, value - (1 << width), value)
+            out[f.name][:, lane] = value
+            offset += width
+    return out
+
+
+# ASCII hex digit -> its value; anything else (x, z, X, Z: an undefined bit) -> 16
+_HEX = np.full(256, 16, dtype=np.uint8)
+for _i, _c in enumerate(b"0123456789abcdef"):
+    _HEX[_c] = _HEX[ord(chr(_c).upper())] = _i
+
+
+def hex_bytes(digits: np.ndarray) -> np.ndarray:
+    """Hex numbers as ASCII, (rows, digits) most significant digit first, as bytes (rows,
+    bytes + 16) least significant first, zero bytes after them (unpack_hex reads 8 at a time);
+    ValueError if a digit is not hex (a simulator's x or z)."""
+    nibbles = _HEX[digits]
+    if (nibbles > 15).any():
+        row = int(np.argwhere(nibbles > 15)[0][0])
+        raise ValueError(f"row {row}: {bytes(digits[row]).decode()!r} is not hex")
+    if nibbles.shape[1] % 2:
+        nibbles = np.pad(nibbles, ((0, 0), (1, 0)))
+    msb_first = (nibbles[:, 0::2] << 4) | nibbles[:, 1::2]
+    return np.pad(msb_first[:, ::-1], ((0, 0), (0, 16)))
+
+
+def _word(raw: np.ndarray, first: int) -> np.ndarray:
+    """The 64-bit little-endian word at byte `first` of every row."""
+    return np.ascontiguousarray(raw[:, first:first + 8]).view("<u8")[:, 0]
+
+
+def unpack_hex(digits: np.ndarray, fields: list[Field], lanes: int,
+               beat_fields: list[Field] | tuple[Field, ...] = ()) -> dict[str, np.ndarray]:
+    """unpack() from the words as ASCII hex (rows, digits), most significant digit first: each
+    field read as the 64-bit little-endian word at its first byte, shifted and masked."""
+    raw = hex_bytes(digits)
+    out = {f.name: np.zeros((len(raw), lanes), dtype=np.int64) for f in fields}
+    out.update({f.name: np.zeros((len(raw), 1), dtype=np.int64) for f in beat_fields})
+    lane_w = sum(f.fmt.width for f in fields)
+    groups = [(lane, lane * lane_w, fields) for lane in range(lanes)]
+    groups.append((0, lanes * lane_w, list(beat_fields)))
+    for lane, offset, group in groups:
+        for f in group:
+            width, first, shift = f.fmt.width, offset // 8, offset % 8
+            assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
+            word = _word(raw, first) >> np.uint64(shift)
+            if width + shift > 64:   # its last bits in the byte after those 8
+                word |= _word(raw, first + 8) << np.uint64(64 - shift)
+            value = (word & np.uint64((1 << width) - 1)).astype(np.int64)
             if f.fmt.signed:
                 value = np.where(value >> (width - 1) != 0, value - (1 << width), value)
             out[f.name][:, lane] = value

@@ -18,7 +18,7 @@ from typing import Any
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, SimTimeoutError, with_timeout
+from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -27,12 +27,14 @@ from gpf.model.formats import SHIFT_BITS
 from gpf.model.grng import seed_words
 from gpf.model.scenarios import Scenario, read_csv
 from gpf.outputs import write_json
-from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
+from gpf.rtl.filter import CYCLES_W, HARNESS_STEPS_MAX, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
+from gpf.tb.gpf.feeds import HarnessFeed, Layout, StepBeats, StreamFeed
 from gpf.tb.gpf.ip import Ip
-from gpf.tb.harness import CLOCK_NS, Bench, reset, start
-from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
+from gpf.tb.gpf.model_ahead import Expected, ModelAhead
+from gpf.tb.harness import Bench, reset, start
+from gpf.tb.scoreboard import Field, Scoreboard, pack
 from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
@@ -57,6 +59,8 @@ class RunSpec:
     load_seed: bool = True
     init_particles: int | None = None  # the N the init beat carries (default: particles)
     stall: float = 0.0                 # probability of a stall on every stream the tb drives
+    harness: bool = True               # the steps through gpf_<app>_harness where it runs them
+    bare: bool = False                 # the harness alone: no model, nothing read or checked
     out: str | None = None             # results JSON
     progress: str | None = None        # a file rewritten after every step: "step mismatches"
 
@@ -129,6 +133,14 @@ def expected_taps(res: StepResult, lanes: int) -> tuple[dict, dict]:
     return cond, part
 
 
+def wrong_order(draws: np.ndarray, n: int) -> np.ndarray:
+    """The deliberately broken model's draws (steps, N, D): each particle's n conditioning
+    draws in the wrong order."""
+    draws = draws.copy()
+    draws[:, :, :n] = draws[:, :, n - 1::-1]
+    return draws
+
+
 def expected_est(s: Streams, res: StepResult, sticky: int) -> dict[str, np.ndarray]:
     values = {f"mu{i}": int(v) for i, v in enumerate(res.mu)}
     values |= {f"s{i}_{j}": int(res.sigma[(i, j)]) for i, j in s.pairs}
@@ -161,6 +173,8 @@ class RunResult:
     quantisation_error: list[float] = field(default_factory=list)  # rtl vs float64, per step
     estimates: dict[str, list] = field(default_factory=dict)
     wall_seconds: float = 0.0   # the simulation and its checks, the build excluded
+    particles_simulated: int = 0       # a bare run's (RunSpec.bare): nothing checked
+    stepping_seconds: float = 0.0      # a bare run's: from the first step beat to the last result
 
 
 def scenario_of(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario]:
@@ -187,6 +201,8 @@ class FilterBench:
         # gpf_<app>_axi: aclk, aresetn, seed and N through registers, TLAST on m_est, padding
         self.ip = Ip.of(dut, self.gpf.dp.app) if hasattr(dut, "aresetn") else None
         self.clk = dut.aclk if self.ip else dut.clk
+        # gpf_<app>_harness around the core: it runs the clock, and the run's steps (feeds.py)
+        self.harness = hasattr(dut, "fast")
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
                                         expect_mismatch=corrupt)
                        for name, fields in (("cond", self.s.cond),
@@ -200,6 +216,8 @@ class FilterBench:
             getattr(d, f"{name}_tdata").value = 0
         for name in ("m_est", "m_cond", "m_part"):
             getattr(d, f"{name}_tready").value = 1
+        if self.harness:   # the core's ports are cocotb's until a run hands them over
+            d.fast.value = d.load.value = 0
 
     async def send(self, name: str, words: list[int], idle: float = 0.0, tag: str = "") -> None:
         """Beats on an input stream (seed, init, step inputs), each a packet. Into
@@ -222,7 +240,7 @@ class FilterBench:
         self.idle()
         if self.ip:
             await self.ip.reset()
-        elif self.clock_running:
+        elif self.clock_running or self.harness:   # the harness runs its own clock
             await reset(self.dut)
         else:
             await start(self.dut)
@@ -265,7 +283,7 @@ class FilterBench:
         return out | {f"s{i}_{j}": v for (i, j), v in self.gpf.quantise_sigma(sigma0).items()}
 
     async def run(self) -> RunResult:
-        d, spec, gpf, s = self.dut, self.spec, self.gpf, self.s
+        spec, gpf, s = self.spec, self.gpf, self.s
         lanes = gpf.cfg.lanes
         name, sc = scenario_of(gpf, spec)
         steps = sc.steps
@@ -273,11 +291,6 @@ class FilterBench:
                             spec.seed, name)
         began = time.monotonic()
         await self.begin()
-        # the model's draws: the GRNG after the same seed load (or after reset)
-        draws = gpf.draws(steps, spec.seed if spec.load_seed else None)
-        if self.corrupt:   # the broken model: conditioning draws in the wrong order
-            draws = draws.copy()
-            draws[:, :, : gpf.dp.n] = draws[:, :, gpf.dp.n - 1:: -1]
         stall = spec.stall
         if spec.load_seed:
             await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes), stall)
@@ -288,69 +301,104 @@ class FilterBench:
 
         raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
-        rng = self.b.rng("streams")
-        sinks = {k: Sink(d, f"m_{k}", stall, rng, has_last=(k != "est" or bool(self.ip)))
-                 for k in ("cond", "part", "est")}
-        steps_in = Source(d, "s_step", stall, rng, [(w, True) for w in step_words],
-                          has_last=bool(self.ip))
-        # one coroutine drives the step inputs and reads every output
-        loop = StreamLoop(self.clk, [steps_in, *sinks.values()])
-        mons = {k: sink.beats for k, sink in sinks.items()}
-        beats = gpf.particles // lanes
-        sticky, rtl_mu = 0, [gpf.to_real_mu(mu)]
-        limit = 200 * (beats + 1000) * (1 + int(10 * stall))
-        for k in range(1, steps + 1):
-            res = gpf.step(mu, chol, sigma, raw_inputs[k - 1], draws[k - 1], keep_particles=True)
-            try:
-                await with_timeout(sinks["est"].wait(k), limit * CLOCK_NS, "ns")
-            except SimTimeoutError:
-                raise AssertionError(f"step {k}: no result after {limit} clocks") from None
-            exp_cond, exp_part = expected_taps(res, lanes)
-            lo, hi = (k - 1) * beats, k * beats
-            for tap, exp, fields, per_beat in (("cond", exp_cond, s.cond, []),
-                                               ("part", exp_part, s.part, [SHIFT])):
-                got = mons[tap][lo:hi]
-                assert len(got) == beats, f"step {k}: {len(got)} {tap} beats, expected {beats}"
-                lasts = [bt.last for bt in got]
-                assert lasts == [False] * (beats - 1) + [True], f"step {k}: {tap} tlast wrong"
-                self.boards[tap].compare(exp, unpack([bt.data for bt in got], fields, lanes,
-                                                     per_beat), first_beat=lo)
-            res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
-            sticky |= res.flags
-            est = unpack([mons["est"][k - 1].data], s.est, 1)
-            exp_est = expected_est(s, res, sticky)
-            exp_est["cycles"] = est["cycles"]   # the count is checked against the period below
-            self.boards["est"].compare(exp_est, est, first_beat=k - 1)
-            res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
-            res_out.flags.append(flag_names(int(est["flags"][0, 0])))
-            res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
-            rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
-                                                    for i in range(gpf.dp.n)])))
-            mu, chol, sigma = res.mu, res.chol, res.sigma
-            res_out.particles_checked += gpf.particles
-            if spec.progress:
-                Path(spec.progress).write_text(f"{k} {self.mismatches}\n")
-        await steps_in.done.wait()
-        for _ in range(50):   # nothing more may come out
-            await RisingEdge(self.clk)
-        loop.stop()
+        feed = self.feed(steps)
+        await feed.start(step_words, sum(f.fmt.width for f in s.step))
+        if spec.bare:
+            return await self.bare(feed, res_out, began)
+        # the model's steps in a thread while the simulator runs, its draws the GRNG model's
+        # after the same seed load (or after reset)
+        model = ModelAhead(gpf, mu, chol, sigma, raw_inputs,
+                           spec.seed if spec.load_seed else None,
+                           lambda res: expected_taps(res, lanes),
+                           corrupt=(lambda d: wrong_order(d, gpf.dp.n)) if self.corrupt
+                           else None)
+        try:
+            await self.steps(feed, model, steps, res_out, mu)
+        finally:
+            model.stop()
+        await feed.finish(steps, gpf.particles // lanes)
         if self.ip:
-            self.check_framing(mons)
-        assert len(mons["est"]) == steps, "extra result beats"
-        assert len(mons["cond"]) == len(mons["part"]) == steps * beats, \
-            "extra tap beats"
-        est_cycles = [bt.cycle for bt in mons["est"]]
-        res_out.period_per_step = [b - a for a, b in zip(est_cycles, est_cycles[1:],
-                                                         strict=False)]
+            self.check_framing(feed.beats)
         res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
         res_out.mismatches = self.mismatches
         res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
                                        if b.first_mismatch), None)
         res_out.wall_seconds = round(time.monotonic() - began, 3)
-        acc = accuracy(gpf, sc, draws, np.array(rtl_mu))
+        acc = accuracy(gpf, sc, model.draws(), np.array(self.rtl_mu), np.array(self.fixed_mu))
         res_out.rmse, res_out.metrics, res_out.lost_track = acc.rmse, acc.metrics, acc.lost
         res_out.quantisation_error, res_out.estimates = acc.quantisation, acc.estimates
         return res_out
+
+    async def steps(self, feed: HarnessFeed | StreamFeed, model: ModelAhead, steps: int,
+                    res_out: RunResult, mu0: np.ndarray) -> None:
+        """Each step's beats as they come, scored against the model's; what the run reports
+        (cycle counts, flags, ESS, both estimates, the period between results)."""
+        gpf = self.gpf
+        beats = gpf.particles // gpf.cfg.lanes
+        limit = 200 * (beats + 1000) * (1 + int(10 * self.spec.stall))
+        sticky, est_cycles = 0, []
+        self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
+        reported = time.monotonic()
+        for k in range(1, steps + 1):
+            got = await feed.step(k, beats, limit)
+            exp = model.get()
+            res = exp.res
+            sticky |= res.flags
+            self.score_step(k, exp, got, beats, sticky)
+            res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
+            est = got.est
+            est_cycles.append(got.est_cycle)
+            res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
+            res_out.flags.append(flag_names(int(est["flags"][0, 0])))
+            res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
+            self.rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
+                                                         for i in range(gpf.dp.n)])))
+            self.fixed_mu.append(gpf.to_real_mu(res.mu))
+            res_out.particles_checked += gpf.particles
+            # a file written a few times a second: a write each step costs more than the step
+            if self.spec.progress and (k == steps or time.monotonic() - reported > 0.25):
+                Path(self.spec.progress).write_text(f"{k} {self.mismatches}\n")
+                reported = time.monotonic()
+        res_out.period_per_step = [b - a for a, b in zip(est_cycles, est_cycles[1:],
+                                                         strict=False)]
+
+    async def bare(self, feed: HarnessFeed, res_out: RunResult, began: float) -> RunResult:
+        """The simulator's own speed on this RTL: the harness runs every step, Python only
+        waits for the last result (RunResult.particles_simulated, nothing checked)."""
+        assert isinstance(feed, HarnessFeed), "a bare run needs gpf_<app>_harness"
+        stepping = time.monotonic()
+        beats = self.gpf.particles // self.gpf.cfg.lanes
+        await feed.wait(res_out.steps, 200 * (beats + 1000) * res_out.steps)
+        res_out.stepping_seconds = round(time.monotonic() - stepping, 3)
+        await feed.finish(res_out.steps, beats)
+        res_out.particles_simulated = res_out.steps * res_out.particles
+        res_out.wall_seconds = round(time.monotonic() - began, 3)
+        return res_out
+
+    def feed(self, steps: int) -> HarnessFeed | StreamFeed:
+        """gpf_<app>_harness's streams where it runs them (RunSpec.harness, steps it holds),
+        cocotb's drivers and monitors otherwise."""
+        layout = Layout(self.s.cond, self.s.part, self.s.est, SHIFT, self.gpf.cfg.lanes)
+        if self.harness and self.spec.harness and steps <= HARNESS_STEPS_MAX:
+            seed = self.b.rng("harness-stalls").getrandbits(32)
+            self.dut._log.info("harness stalls: probability %g, seed 0x%08x (from SEED=%d)",
+                               self.spec.stall, seed, self.b.seed)
+            return HarnessFeed(self.dut, layout, self.spec.stall, seed)
+        return StreamFeed(self.dut, self.clk, layout, self.spec.stall, self.b.rng("streams"),
+                          est_last=bool(self.ip))
+
+    def score_step(self, k: int, exp: Expected, got: StepBeats, beats: int,
+                   sticky: int) -> None:
+        """Every particle's fields on both taps, each tap's tlast, the result (its cycle count
+        aside: test_filter checks it against the period between results)."""
+        lo = (k - 1) * beats
+        for tap, fields in (("cond", exp.cond), ("part", exp.part)):
+            lasts = got.lasts[tap]
+            assert not lasts[:-1].any() and lasts[-1], f"step {k}: {tap} tlast wrong"
+            self.boards[tap].compare(fields, got.taps[tap], first_beat=lo)
+        exp_est = expected_est(self.s, exp.res, sticky)
+        exp_est["cycles"] = got.est["cycles"]
+        self.boards["est"].compare(exp_est, got.est, first_beat=k - 1)
 
     def check_framing(self, mons: dict[str, list]) -> None:
         """gpf_<app>_axi: every m_est beat a packet (TLAST), every stream's padding zero."""
@@ -374,19 +422,17 @@ class Accuracy:
     estimates: dict[str, list]
 
 
-def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray) -> Accuracy:
-    """The RTL's, the fixed-point model's and the float64 model's estimates (the float one
-    driven by the same draws): every metric's RMSE over all steps and the last 20 %, whether
-    the RTL lost track, its distance from the float64 estimate per step (its quantisation
-    error), the estimates."""
-    from gpf.model.fixed_gpf import run
-
-    fixed = run(gpf, sc, draws=draws)
+def accuracy(gpf: FixedGPF, sc: Scenario, draws: np.ndarray, rtl_mu: np.ndarray,
+             fixed_mu: np.ndarray) -> Accuracy:
+    """The RTL's, the fixed-point model's (as the run computed them, step by step) and the
+    float64 model's estimates (the float one driven by the same draws): every metric's RMSE
+    over all steps and the last 20 %, whether the RTL lost track, its distance from the float64
+    estimate per step (its quantisation error), the estimates."""
     floating = FloatGPF(gpf.cfg, gpf.particles).run(sc, draws=gpf.dp.noise.to_real(draws))
-    report = run_metrics(gpf.dp.app, sc.truth, {"rtl": rtl_mu, "fixed": fixed.mu,
+    report = run_metrics(gpf.dp.app, sc.truth, {"rtl": rtl_mu, "fixed": fixed_mu,
                                                 "float": floating.mu})
     estimates = {"truth": [None if not np.all(np.isfinite(r)) else r for r in sc.truth.tolist()],
-                 "float": floating.mu.tolist(), "fixed": fixed.mu.tolist(),
+                 "float": floating.mu.tolist(), "fixed": fixed_mu.tolist(),
                  "rtl": rtl_mu.tolist()}
     if gpf.dp.app == "bot":
         estimates["observer"] = sc.inputs["observer"][1:].tolist()
