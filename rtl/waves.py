@@ -757,7 +757,23 @@ VIEWS.update(sample_cond=sample_cond_view, propagate_bot=propagate_bot_view)
 VIEWS.update(moments=moments_view)
 VIEWS.update(weight_bot=weight_bot_view, weight_uav=weight_uav_view)
 VIEWS.update(cholesky=cholesky_view, sigma_predict=sigma_predict_view)
-VIEWS.update(gpf_bot=filter_view, gpf_uav=filter_view)
+
+
+def harness_view(cfg: Config, sim: str) -> list[Group]:
+    """gpf_<app> as simulated: the core inside its testbench harness (gpf_<app>_harness)."""
+    return filter_view(cfg, sim, filter_core(f"gpf_{cfg.app}"))
+
+
+def filter_core(module: str) -> str:
+    """Where a whole filter's core is in a simulation of `module`: inside the IP's top or the
+    testbench harness, or the top itself."""
+    m = MODULES[module]
+    if module.endswith("_axi"):
+        return f"{m.top}.u_core"
+    return f"{m.harness}.u_core" if m.harness else m.top
+
+
+VIEWS.update(gpf_bot=harness_view, gpf_uav=harness_view)
 
 
 def ip_view(cfg: Config, sim: str) -> list[Group]:
@@ -803,7 +819,7 @@ def view_window(cfg: Config, module: str, sim: str, dump: Dump) -> Window | None
     clock = CLOCK_NS * 1000  # the dumps' time unit is 1 ps
     top = MODULES[module].top
     if MODULES[module].is_filter:
-        core = f"{top}.u_core" if module.endswith("_axi") else top
+        core = filter_core(module)
         results = _beats(dump, core, "m_est")
         if not results:
             return None

@@ -22,8 +22,11 @@ def test_same_config_same_bytes(tmp_path: Path) -> None:
     cfg = load_config("configs/bot.toml")
     a = generate(cfg, tmp_path / "a")
     b = generate(load_config("configs/bot.toml"), tmp_path / "b")
-    names = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert names == sorted(p.name for p in (tmp_path / "b").iterdir())
+    names = sorted(str(p.relative_to(tmp_path / "a")) for p in (tmp_path / "a").rglob("*")
+                   if p.is_file())
+    assert names == sorted(str(p.relative_to(tmp_path / "b"))
+                           for p in (tmp_path / "b").rglob("*") if p.is_file())
+    assert "tb/gpf_bot_harness.sv" in names   # the testbench harness too
     for name in names:
         assert (a.out_dir / name).read_bytes() == (b.out_dir / name).read_bytes(), name
 
@@ -190,3 +193,14 @@ def test_register_block_edits_must_match() -> None:
     from gpf.rtl.regs import UNUSED_EDITS
     with pytest.raises(ValueError, match="PeakRDL's output changed"):
         _edit("input wire [2:0] s_axil_awprot,\n", "x.sv", UNUSED_EDITS[""])
+
+
+def test_harness_outside_the_ip(tmp_path: Path) -> None:
+    """The whole filter's testbench harness is generated (tb/) but in none of the file lists
+    the user synthesizes."""
+    out = generate(load_config("configs/bot.toml"), tmp_path)
+    assert out.harnesses["gpf_bot"] == tmp_path / "tb" / "gpf_bot_harness.sv"
+    assert out.harnesses["gpf_bot"].read_text().count("module gpf_bot_harness") == 1
+    for listing in tmp_path.glob("*.f"):
+        assert "harness" not in listing.read_text(), listing.name
+    assert not any("harness" in p.name for files in out.files.values() for p in files)

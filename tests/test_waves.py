@@ -83,7 +83,7 @@ def test_run_sim_builds_and_dumps_where_waves_looks(monkeypatch, tmp_path, sim, 
     monkeypatch.setattr(cocotb_tools.runner, "get_results", lambda xml: (1, 0))
     monkeypatch.setattr(gpf.sim, "check_simulator", lambda *a: None)
     monkeypatch.setattr(gpf.sim, "generate", lambda cfg, out, template_dir: SimpleNamespace(
-        files={"moments": [out / "moments.sv"]}, out_dir=out))
+        files={"moments": [out / "moments.sv"]}, out_dir=out, harnesses={}))
     monkeypatch.setattr(gpf.sim, "_runtime_cache", lambda args: tmp_path / "runtime")
     monkeypatch.setattr(gpf.sim, "_keep_runtime", lambda *a: None)
     views: list[Path] = []
@@ -288,11 +288,13 @@ def test_ip_view_holds_the_core_once():
 
 
 FILTER_VCD = """$timescale 1ps $end
-$scope module gpf_bot $end
+$scope module gpf_bot_harness $end
+$scope module u_core $end
 $var wire 1 ! s_step_tvalid $end
 $var wire 1 " s_step_tready $end
 $var wire 1 # m_est_tvalid $end
 $var wire 1 $ m_est_tready $end
+$upscope $end
 $upscope $end
 $enddefinitions $end
 #0

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles, First, RisingEdge, Timer, ValueChange
+from cocotb.triggers import ClockCycles, First, ReadOnly, RisingEdge, Timer, ValueChange
 
 from gpf.tb.harness import CLOCK_NS
 from gpf.tb.scoreboard import Field, unpack, unpack_hex
@@ -97,7 +97,9 @@ class HarnessFeed:
         d.stall_seed.value = self.seed
         d.fast.value = 1
         d.load.value = 1
-        await RisingEdge(d.clk)   # the harness loads at this edge
+        await RisingEdge(d.clk)   # the harness loads at this edge (load rose)
+        await ReadOnly()          # and has opened its records by now
+        await RisingEdge(d.clk)
         d.load.value = 0
         for tap, name in RECORDS.items():
             self.files[tap] = (self.workdir / name).open("rb")
