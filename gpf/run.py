@@ -29,6 +29,7 @@ class RunArgs:
     waves: bool
     gate: bool = False      # the synthesized netlist instead of the RTL
     ip: bool = False        # through gpf_<app>_axi: AXI4-Lite registers, byte-wide streams
+    bare: bool = False      # the harness alone, nothing checked: the simulator's own speed
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
@@ -46,7 +47,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     if scenario and scenario.endswith(".csv"):
         scenario = str(_recording(Path(scenario), args.steps, work))
     spec = {"steps": args.steps, "particles": args.particles, "seed": args.seed,
-            "scenario": scenario, "out": str(out), "progress": str(progress_file)}
+            "scenario": scenario, "out": str(out), "progress": str(progress_file),
+            "bare": args.bare}
     log = build_root / cfg.name / f"{module}-{args.sim}{'-gate' if args.gate else ''}.log"
     result: dict[str, Any] = {}
 

@@ -335,7 +335,9 @@ class FilterBench:
         (cycle counts, flags, ESS, both estimates, the period between results)."""
         gpf = self.gpf
         beats = gpf.particles // gpf.cfg.lanes
-        limit = 200 * (beats + 1000) * (1 + int(10 * self.spec.stall))
+        # a step takes N / LANES + 235 or so clocks, a few times that with every stream stalled
+        # half the time: ten times as long is a hang (a lost beat), not a slow step
+        limit = 10 * (beats + 300) * (1 + int(10 * self.spec.stall))
         sticky, est_cycles = 0, []
         self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
         reported = time.monotonic()
