@@ -104,9 +104,9 @@ class HarnessFeed:
         for tap, name in RECORDS.items():
             self.files[tap] = (self.workdir / name).open("rb")
 
-    async def step(self, k: int, beats: int, limit: int) -> StepBeats:
-        """Wait for the k-th result (at most `limit` clocks), then read the step's beats."""
-        await self.wait(k, limit)
+    def read(self, k: int, beats: int) -> StepBeats:
+        """Step k's beats from the records (its result is out: every beat of it is there).
+        Touches no simulator handle: it runs in the checker's thread."""
         lasts, taps = {}, {}
         for tap in ("cond", "part"):
             rows = self._rows(tap, beats, k)
@@ -189,13 +189,17 @@ class StreamFeed:
     def beats(self) -> dict[str, list[Beat]]:
         return {k: sink.beats for k, sink in self.sinks.items()}
 
-    async def step(self, k: int, beats: int, limit: int) -> StepBeats:
+    async def wait(self, k: int, limit: int) -> None:
+        """Until the k-th result is out (failing after `limit` clocks)."""
         from cocotb.triggers import SimTimeoutError, with_timeout
 
         try:
             await with_timeout(self.sinks["est"].wait(k), limit * CLOCK_NS, "ns")
         except SimTimeoutError:
             raise AssertionError(f"step {k}: no result after {limit} clocks") from None
+
+    def read(self, k: int, beats: int) -> StepBeats:
+        """Step k's beats as the monitors took them (its result is out)."""
         lo, hi = (k - 1) * beats, k * beats
         lasts, taps = {}, {}
         for tap in ("cond", "part"):

@@ -9,6 +9,7 @@ to RunSpec.out as JSON for `gpf run` to report.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -32,7 +33,7 @@ from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
 from gpf.tb.gpf.feeds import HarnessFeed, Layout, StepBeats, StreamFeed
 from gpf.tb.gpf.ip import Ip
-from gpf.tb.gpf.model_ahead import Expected, ModelAhead
+from gpf.tb.gpf.model_ahead import Checker, Expected, ModelAhead
 from gpf.tb.harness import Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack
 from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
@@ -48,6 +49,11 @@ IP_OUTPUTS = [*OUTPUTS, "m_est_tlast", "irq"] + [
 FLAGS = Format.parse("u4.0")
 SAT = Format.parse("u1.0")
 SHIFT = Field("shift", Format(False, SHIFT_BITS, 0))
+
+
+QUIET = logging.getLogger("gpf.tb.checker")
+QUIET.propagate = False
+QUIET.addHandler(logging.NullHandler())
 
 
 @dataclass
@@ -203,8 +209,10 @@ class FilterBench:
         self.clk = dut.aclk if self.ip else dut.clk
         # gpf_<app>_harness around the core: it runs the clock, and the run's steps (feeds.py)
         self.harness = hasattr(dut, "fast")
+        # scored in the checker's thread, which must not log (cocotb's log handler asks the
+        # simulator for the time): the first mismatch is logged after the run
         self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
-                                        expect_mismatch=corrupt)
+                                        expect_mismatch=corrupt, log=QUIET)
                        for name, fields in (("cond", self.s.cond),
                                             ("part", self.s.part + [SHIFT]),
                                             ("est", self.s.est))}
@@ -331,38 +339,53 @@ class FilterBench:
 
     async def steps(self, feed: HarnessFeed | StreamFeed, model: ModelAhead, steps: int,
                     res_out: RunResult, mu0: np.ndarray) -> None:
-        """Each step's beats as they come, scored against the model's; what the run reports
-        (cycle counts, flags, ESS, both estimates, the period between results)."""
+        """Each step scored against the model's as its result comes out, in a thread (Checker)
+        while the simulation goes on; what the run reports (cycle counts, flags, ESS, both
+        estimates, the period between results)."""
         gpf = self.gpf
         beats = gpf.particles // gpf.cfg.lanes
         # a step takes N / LANES + 235 or so clocks, a few times that with every stream stalled
         # half the time: ten times as long is a hang (a lost beat), not a slow step
         limit = 10 * (beats + 300) * (1 + int(10 * self.spec.stall))
-        sticky, est_cycles = 0, []
+        self.sticky, self.est_cycles = 0, []
         self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
-        reported = time.monotonic()
-        for k in range(1, steps + 1):
-            got = await feed.step(k, beats, limit)
-            exp = model.get()
-            res = exp.res
-            sticky |= res.flags
-            self.score_step(k, exp, got, beats, sticky)
-            res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
-            est = got.est
-            est_cycles.append(got.est_cycle)
-            res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
-            res_out.flags.append(flag_names(int(est["flags"][0, 0])))
-            res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
-            self.rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
-                                                         for i in range(gpf.dp.n)])))
-            self.fixed_mu.append(gpf.to_real_mu(res.mu))
-            res_out.particles_checked += gpf.particles
-            # a file written a few times a second: a write each step costs more than the step
-            if self.spec.progress and (k == steps or time.monotonic() - reported > 0.25):
-                Path(self.spec.progress).write_text(f"{k} {self.mismatches}\n")
-                reported = time.monotonic()
-        res_out.period_per_step = [b - a for a, b in zip(est_cycles, est_cycles[1:],
+        self.reported = time.monotonic()
+        checker = Checker(lambda k: self.check_step(k, feed.read(k, beats), model.get(), beats,
+                                                     steps, res_out))
+        try:
+            for k in range(1, steps + 1):
+                await feed.wait(k, limit)
+                checker.submit(k)
+            checker.finish()
+        finally:
+            checker.stop()
+            for board in self.boards.values():   # logged here, not from the checker's thread
+                if board.first_mismatch:
+                    report = self.dut._log.info if self.corrupt else self.dut._log.error
+                    report("first mismatch: %s", board.first_mismatch)
+        res_out.period_per_step = [b - a for a, b in zip(self.est_cycles, self.est_cycles[1:],
                                                          strict=False)]
+
+    def check_step(self, k: int, got: StepBeats, exp: Expected, beats: int, steps: int,
+                   res_out: RunResult) -> None:
+        """Step k scored, and what the run reports of it (in the checker's thread)."""
+        gpf, res = self.gpf, exp.res
+        self.sticky |= res.flags
+        self.score_step(k, exp, got, beats, self.sticky)
+        res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
+        est = got.est
+        self.est_cycles.append(got.est_cycle)
+        res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
+        res_out.flags.append(flag_names(int(est["flags"][0, 0])))
+        res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
+        self.rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
+                                                     for i in range(gpf.dp.n)])))
+        self.fixed_mu.append(gpf.to_real_mu(res.mu))
+        res_out.particles_checked += gpf.particles
+        # a file written a few times a second: a write each step costs more than the step
+        if self.spec.progress and (k == steps or time.monotonic() - self.reported > 0.25):
+            Path(self.spec.progress).write_text(f"{k} {self.mismatches}\n")
+            self.reported = time.monotonic()
 
     async def bare(self, feed: HarnessFeed, res_out: RunResult, began: float) -> RunResult:
         """The simulator's own speed on this RTL: the harness runs every step, Python only

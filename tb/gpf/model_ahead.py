@@ -1,10 +1,12 @@
-"""The fixed-point model of a whole-filter run, computed in a thread ahead of the simulation.
+"""A whole-filter run's Python work in threads beside the simulation.
 
-The model's steps depend on the model's own previous step only, never on the RTL's, so they
-can run while the simulator does: the cocotb thread gives the simulator the GIL back whenever
-it waits for a trigger, and the thread uses that time. The cocotb side takes step k's results
-(the model's step, the taps' expected fields) with `get`, in order; a failure in the thread is
-raised there.
+The simulator runs in cocotb's thread, without the GIL between triggers, so Python threads
+work while it simulates:
+ModelAhead: the fixed-point model's steps, ahead of the simulation (they depend on the model's
+  own previous step only, never on the RTL's); step k's results with `get`, in order.
+Checker: each step read and scored as soon as its result is out, while the simulation goes on
+  to the next; the cocotb side only waits for each result and hands it over.
+A failure in either thread is raised in the cocotb thread.
 """
 
 from __future__ import annotations
@@ -95,3 +97,41 @@ class ModelAhead:
         """End the thread (early, in a run that failed)."""
         self._stop.set()
         sys.setswitchinterval(self._switch)
+
+
+class Checker:
+    """Runs check(k) in a thread for each k submitted, in order (see the module's docstring)."""
+
+    def __init__(self, check: Callable[[int], None]):
+        self.check = check
+        self.error: BaseException | None = None
+        self._todo: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._run, name="checker", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (k := self._todo.get()) is not None:
+            try:
+                self.check(k)
+            except BaseException as exc:   # raised in the cocotb thread
+                self.error = exc
+                return
+
+    def submit(self, k: int) -> None:
+        """Check step k (its beats are out); raise what an earlier check raised."""
+        self._raise()
+        self._todo.put(k)
+
+    def finish(self) -> None:
+        """Wait for every check submitted."""
+        self._todo.put(None)
+        self._thread.join()
+        self._raise()
+
+    def stop(self) -> None:
+        """No more checks (a run that failed): the thread ends after the one it is on."""
+        self._todo.put(None)
+
+    def _raise(self) -> None:
+        if self.error is not None:
+            raise self.error
