@@ -247,6 +247,11 @@ FILTER_MUTANTS = {
     "ctrl-stall-est": ("ctrl", "ctrl.sv.j2", "assign m_est_tdata = est_q;",
                        "assign m_est_tdata = est_q ^ {{ est_w }}'(m_est_tvalid && !m_est_tready);",
                        "bot_fixed_observer", {}, "test_stalls"),
+    # an X in the conditioning tap's last beat of a step while it is offered (Icarus keeps it):
+    # the harness's check of tdata while tvalid is high
+    "top-tap-x": ("gpf_bot", "gpf.sv.j2", "assign m_cond_tdata = sq_data;",
+                  "assign m_cond_tdata = sq_data ^ {{ lanes * cond_lane_w }}'(sq_last ? 1'bx "
+                  ": 1'b0);", None, {}),
     # the handshakes as flip-flops: the step's ready raised without the beat seen offered, so
     # ctrl takes a step nobody sent (a result too many, inputs that are not the step's)
     "ctrl-step-unseen": ("ctrl", "ctrl.sv.j2", "nx_ready && s_step_tvalid && !s_step_tready",

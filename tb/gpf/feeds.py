@@ -165,9 +165,6 @@ class HarnessFeed:
         for f in self.files.values():
             f.close()
 
-    async def stop(self) -> None:
-        self.dut.fast.value = 0
-
 
 class StreamFeed:
     """The run's steps through cocotb's drivers and monitors (see the module's docstring)."""

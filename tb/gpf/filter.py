@@ -2,6 +2,11 @@
 run (seed load, init, steps) with every particle, weight, mean, covariance and L entry compared
 bit-exactly with gpf.model.fixed_gpf.FixedGPF.
 
+The steps go through gpf_<app>_harness where it is the toplevel (feeds.HarnessFeed: the stream
+work in the simulator, the beats read once a step), else through cocotb's own drivers and
+monitors (feeds.StreamFeed: gpf_<app>_axi); the model and the scoring run in threads beside the
+simulation (model_ahead.py).
+
 A run is described by a RunSpec (from GPF_RUN, set by `gpf run` and the tests); its results go
 to RunSpec.out as JSON for `gpf run` to report.
 """

@@ -1,10 +1,12 @@
-"""cocotb testbench of the whole filter, gpf_bot or gpf_uav (tb/gpf/filter.py does the work).
+"""cocotb testbench of the whole filter, gpf_bot or gpf_uav (tb/gpf/filter.py does the work),
+inside its testbench harness gpf_<app>_harness (the steps' streams, stalls and protocol checks
+in the simulator: tb/gpf/feeds.py).
 
 test_filter: the run GPF_RUN describes (`gpf run`; a few steps by default), no stalls: every
   particle, weight and estimate bit-exact, and each step's cycle count equal to the measured
   period between result beats.
-test_stalls: 50 % random stalls on every stream the testbench drives or reads, the same
-  checks (nothing lost, duplicated or reordered).
+test_stalls: 50 % random stalls on every stream the testbench drives or reads (the harness's,
+  from a seed the test prints), the same checks (nothing lost, duplicated or reordered).
 test_reset_mid_step: a reset half-way through a step; what follows starts clean.
 Every test checks that no output is X or Z after reset.
 test_corrupted_model_is_caught: a model with its draws in the wrong order must fail.
