@@ -218,7 +218,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         # several times the size, to compile and to run. The testbenches touch the toplevel's
         # ports only (waves trace every signal either way)
         build_args += ["--no-public-flat-rw", "--public-depth", "1"]
-        if harness:   # it runs its own clock
+        if harness:   # it runs its own clock: timing, whose C++ coroutines g++ 12 enables only
+            # with -fcoroutines (the bundled Verilator's makefile passes none)
             build_args += ["--timing", "-CFLAGS", "-fcoroutines"]
         if waves:
             build_args += ["--trace-fst", "--trace-structs"]
