@@ -204,8 +204,10 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
                               sources[0].parent.parent.name if gate else None, waves=waves)
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
-    harness = generated.harnesses.get(module)
-    if harness:   # the testbench's harness around the top (or its netlist) is the toplevel
+    # the testbench's harness around the top is the toplevel; not around a netlist (Verilator
+    # 5.049 stopped on an internal error, a name hash, building the two together)
+    harness = None if gate else generated.harnesses.get(module)
+    if harness:
         sources = [*sources, harness]
         top = MODULES[module].harness
     runner = get_runner(sim)
