@@ -597,6 +597,10 @@ def cmd_timing(args: argparse.Namespace) -> int:
         print(f"  DSP registers: {d['inputs']} operands and {d['outputs']} products of "
               f"{d['dsps']} MULT18X18D registered inside ({d['flops_removed']} flip-flops "
               "moved out of the fabric)")
+    if t.bram_registers:
+        r = t.bram_registers
+        print(f"  block RAM registers: {r['ports']} of {r['rams']} DP16KD read with their output "
+              f"register ({r['flops_removed']} flip-flops moved out of the fabric)")
     print(f"  Fmax {t.fmax_mhz:.1f} MHz (target {t.target_mhz:g}: "
           f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
     print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_cells} logic cells "
@@ -729,8 +733,9 @@ def build_parser() -> Parser:
                    help="nextpnr's placement seed (default 1; another seed places in "
                    "build/<config>/timing/<module>-seed<n>: several run side by side)")
     p.add_argument("--fabric-dsp-registers", action="store_true",
-                   help="leave the multipliers' registers in the fabric, as synth_ecp5 maps "
-                   "them (default: moved into each MULT18X18D, as a vendor flow does)")
+                   help="leave the multipliers' and block RAMs' registers in the fabric, as "
+                   "synth_ecp5 maps them (default: moved into each MULT18X18D and DP16KD, as a "
+                   "vendor flow does)")
     p.set_defaults(func=cmd_timing)
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")

@@ -258,6 +258,6 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     if waves:
         from gpf.rtl.waves import write_view
 
-        write_view(cfg, module, sim, waves_file)
+        write_view(cfg, module, sim, waves_file, netlist=gate)
     tests, failed = get_results(Path(xml))
     return SimResult(module, sim, seed, tests, failed, Path(xml), waves_file if waves else None)

@@ -669,9 +669,35 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
+    """The dot pipeline's issue for each column j and clock c of a Cholesky core (the template
+    reads it as one case table of {j, c}: no adder or compare between the counters and the
+    index registers). Row a = j + 1 + c against column j while c <= n - 1 - j (c = n - 1 - j:
+    row j + 1 against itself, the next pivot's partial sum); each value at the template's widths.
+    Sigma's and L's entry (a, b) sits at a n + b."""
+    n, jw, cw, tw = core["n"], core["jw"], core["cw"], core["tw"]
+    row_w = jw + 1
+
+    def row_base(r: int) -> int:
+        r %= 1 << tw
+        return r * n if r < n else 0
+
+    table = []
+    for j in range(n):
+        left = (n - 1 - j) % (1 << row_w)
+        for c in range(core["c_end"] + 1):
+            part = left % (1 << cw) == c
+            row = (j + 1 + (0 if part else c % (1 << row_w))) % (1 << row_w)
+            col = (j + part) % (1 << row_w)
+            table.append({"key": (j << cw) | c, "ok": int(j < n - 1 and c <= left % (1 << cw)),
+                          "abase": row_base(row), "jbase": row_base(col),
+                          "sidx": (row_base(row) + col % (1 << tw)) % (1 << tw)})
+    return table
+
+
 def propagate_bot_context(cfg: Config) -> dict[str, Any]:
     """p' = p + T v + a e, v' = v + b e per axis (model.blocks.propagate_bot): the constant
-    products (stage 1), one rounded, saturated sum per component (stage 2)."""
+    products (stage 1), one exact sum per component (stage 2), rounded and saturated (stage 3)."""
     dp = datapath(cfg)
     if len(set(dp.x)) != 1:
         raise ValueError(f"propagate_bot: the state components have different formats {dp.x}")
@@ -683,7 +709,7 @@ def propagate_bot_context(cfg: Config) -> dict[str, Any]:
 
     whole = (x.min_raw, x.max_raw, x.frac_bits)
     return {
-        "lanes": cfg.lanes, "latency": 2,
+        "lanes": cfg.lanes, "latency": 3,
         "x_width": x.width, "x_fmt": str(x), "noise_width": noise.width,
         "noise_fmt": str(noise),
         "in_width": 4 * x.width + 2 * noise.width, "out_width": 4 * x.width + 1,
@@ -1005,6 +1031,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
                       "clocks": clocks, "latency": sum(clocks) + 2,
                       "cw": max(clocks).bit_length(), "jw": max(1, (size - 1).bit_length()),
                       "tw": max(size + 1, size * size - 1).bit_length()})
+        cores[-1]["issue"] = _chol_issue_table(cores[-1])
     kinds = list({c["n"]: c for c in cores}.values())
     latency = max(c["latency"] for c in cores) + 1     # + the input register
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
