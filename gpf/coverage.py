@@ -30,14 +30,14 @@ NEVER = "(never sampled)"
 
 def expected_groups() -> list[str]:
     """Every group a complete regression samples: the whole filter of each application and
-    each stream block of it (tb/streaming.py's run_stream: every block but the GRNG)."""
+    each block of it (tb/streaming.py's run_stream, and the GRNG's check)."""
     from gpf.rtl.generate import MODULES
 
     out = []
     for app in ("bot", "uav"):
         out.append(f"gpf.{app}")
         out += [f"{name}.{app}" for name, m in MODULES.items()
-                if app in m.apps and m.simulated and name != "grng"
+                if app in m.apps and m.simulated
                 and not name.startswith("gpf_")]
     return out
 

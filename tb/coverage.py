@@ -225,3 +225,23 @@ def sample_block(block, app: str, lanes: int, got: dict[str, np.ndarray], lasts_
     g.hit("stall.s_axis", *source_bins(source.gaps, source.waits))
     g.hit("stall.m_axis", *sink_bins(sink.waits))
     save()
+
+
+# ---- the GRNG (tb/grng/test_grng.py: every batch of samples it checks) ----------------------
+
+SIGMAS = ("0-1", "1-2", "2-3", "3-4", "4-5", "5+")
+
+
+def sample_grng(app: str, lanes: int, z_real: np.ndarray) -> None:
+    """A batch of the GRNG's samples (reals): LANES, and each sign's band of |z| in sigmas."""
+    if not enabled():
+        return
+    g = group(f"grng.{app}")
+    g.point("lanes", (f"lanes {n}" for n in LANES))
+    g.point("z", (f"{sign}{band}" for sign in "-+" for band in SIGMAS))
+    g.hit("lanes", f"lanes {lanes}")
+    z = np.asarray(z_real, dtype=float).reshape(-1)
+    band = np.minimum(np.floor(np.abs(z)), len(SIGMAS) - 1).astype(int)
+    g.hit("z", *sorted({f"{'-' if neg else '+'}{SIGMAS[k]}"
+                        for neg, k in zip(z < 0, band, strict=True)}))
+    save()
