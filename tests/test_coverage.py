@@ -208,15 +208,18 @@ def test_coverage_filter_faults(config: str, scenario: str) -> None:
 
 # Targets at the edges of the bot state's format (a CSV scenario each, from the generator of
 # bot_far_target): every component after sample_cond and after propagate at its top and its
-# bottom, and a saturation that clears (a target starting at the edge and moving inward).
-# (x, vx, y, vy) as offsets from the edge E: each entry is the initial mean.
+# bottom, a saturation that clears (a target at the edge moving inward), and particles whose
+# distance from the observer saturates up and down in x and y (the weight's own sat: observer
+# and target on opposite edges). name: (initial mean (x, vx, y, vy), observer (x, y)) from the format's edge E.
 EDGE_TARGETS = {
-    "x-low": lambda e: (-e + 6, -3.0, 1.0, 0.3),
-    "y-high": lambda e: (1.0, 0.3, e - 6, 3.0),
-    "y-low": lambda e: (1.0, 0.3, -e + 6, -3.0),
-    "vx-high-vy-low": lambda e: (0.0, e - 0.01, 0.0, -e + 0.01),
-    "vx-low-vy-high": lambda e: (0.0, -e + 0.01, 0.0, e - 0.01),
-    "x-inward": lambda e: (e - 0.02, -3.0, 1.0, 0.3),
+    "x-low": lambda e: ((-e + 6, -3.0, 1.0, 0.3), (0.0, 0.0)),
+    "y-high": lambda e: ((1.0, 0.3, e - 6, 3.0), (0.0, 0.0)),
+    "y-low": lambda e: ((1.0, 0.3, -e + 6, -3.0), (0.0, 0.0)),
+    "vx-high-vy-low": lambda e: ((0.0, e - 0.01, 0.0, -e + 0.01), (0.0, 0.0)),
+    "vx-low-vy-high": lambda e: ((0.0, -e + 0.01, 0.0, e - 0.01), (0.0, 0.0)),
+    "x-inward": lambda e: ((e - 0.02, -3.0, 1.0, 0.3), (0.0, 0.0)),
+    "observer-opposite": lambda e: ((e - 2, 0.3, e - 2, 0.3), (-e / 2, -e / 2)),
+    "observer-opposite-low": lambda e: ((-e + 2, -0.3, -e + 2, -0.3), (e / 2, e / 2)),
 }
 
 
@@ -229,9 +232,10 @@ def test_coverage_edge_targets(tmp_path: Path, target: str) -> None:
 
     cfg = load_config("configs/bot.toml")
     steps, edge = 4, float(cfg.formats["state"].max_real)
-    observer = np.zeros((steps + 1, 2))
+    mean, where = EDGE_TARGETS[target](edge)
+    observer = np.tile(np.array(where, dtype=float), (steps + 1, 1))
     observer[0] = np.nan
-    sc = _bot(cfg, steps, 5, observer, f"edge-{target}", np.array(EDGE_TARGETS[target](edge)))
+    sc = _bot(cfg, steps, 5, observer, f"edge-{target}", np.array(mean))
     path = tmp_path / f"edge-{target}.csv"
     write_csv(sc, path)
     result, res = filter_run("bot", "verilator", 1, steps, 64, seed=1, scenario=str(path),
