@@ -210,7 +210,8 @@ def test_coverage_filter_faults(config: str, scenario: str) -> None:
 # bot_far_target): every component after sample_cond and after propagate at its top and its
 # bottom, a saturation that clears (a target at the edge moving inward), and particles whose
 # distance from the observer saturates up and down in x and y (the weight's own sat: observer
-# and target on opposite edges). name: (initial mean (x, vx, y, vy), observer (x, y)) from the format's edge E.
+# and target on opposite edges). name: (initial mean (x, vx, y, vy), observer (x, y)) from the
+# format's edge E.
 EDGE_TARGETS = {
     "x-low": lambda e: ((-e + 6, -3.0, 1.0, 0.3), (0.0, 0.0)),
     "y-high": lambda e: ((1.0, 0.3, e - 6, 3.0), (0.0, 0.0)),
