@@ -64,7 +64,7 @@ help:
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
 	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] [COVERAGE=1] | make bench"
-	@echo "  make coverage (report build/coverage/) | make coverage-runs [K=pytest -k] [COVERAGE=1]"
+	@echo "  make coverage (report build/coverage/) | make coverage-runs [K=<test filter>] [COVERAGE=1]"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -85,25 +85,23 @@ test: $(STAMP)
 
 # SHARDS=k SHARD=i: shard i (0-based) of k of the selection (conftest.py), each test in one shard;
 # CAMPAIGN_PARTICLES=n adds the stall campaign, n particles over all shards, two pieces a shard
-# then the coverage report of every run so far (build/coverage/): a hole without a reason fails
-# a whole regress (one shard sees only its part)
+# then the coverage report of every run so far (build/coverage/; conftest.py): a hole without a
+# reason fails a whole regress (one shard sees only its part)
 regress: $(STAMP)
-	status=0; $(if $(CAMPAIGN_PARTICLES),GPF_CAMPAIGN_PARTICLES=$(CAMPAIGN_PARTICLES)) \
-	$(BIN)/pytest -n $(JOBS) \
+	$(if $(CAMPAIGN_PARTICLES),GPF_CAMPAIGN_PARTICLES=$(CAMPAIGN_PARTICLES)) $(BIN)/pytest -n $(JOBS) \
 		--dist loadgroup -m "regress or campaign" --shards $(SHARDS) --shard $(SHARD) \
 		tests/test_sim_blocks.py tests/test_sim_filter.py tests/test_synth.py \
 		tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py \
-		tests/test_coverage.py || status=$$?; \
-	$(BIN)/gpf coverage || { [ $(SHARDS) != 1 ] || status=1; }; exit $$status
+		tests/test_coverage.py --coverage-report
 
 # the functional (and, with COVERAGE=1, code) coverage of the runs in build/coverage/
 coverage: $(STAMP)
 	$(BIN)/gpf coverage
 
-# the runs added for coverage alone (part of make regress), then the report
+# the runs added for coverage alone (part of make regress), then the report; K: a -k filter
 coverage-runs: $(STAMP)
-	status=0; $(BIN)/pytest -n $(JOBS) --dist loadgroup -m coverage tests/test_coverage.py \
-		$(if $(K),-k "$(K)") || status=$$?; $(BIN)/gpf coverage || status=1; exit $$status
+	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m coverage tests/test_coverage.py \
+		$(if $(K),-k "$(K)") --coverage-report
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)
