@@ -70,6 +70,9 @@ class Group:
             self._bins[point] = bins
         return self
 
+    def has(self, point: str) -> bool:
+        return point in self._samplers
+
     def hit(self, point: str, *bins: str) -> None:
         sampler = self._samplers[point]
         for b in bins:
@@ -215,7 +218,7 @@ def sample_block(block, app: str, lanes: int, got: dict[str, np.ndarray], lasts_
     g = block_group(block, app)
     outs = list(block.fields_out) + list(block.beat_out)
     g.hit("lanes", f"lanes {lanes}")
-    if "rail" in g._bins:
+    if g.has("rail"):
         g.hit("rail", *rails_hit(outs, got))
     if "sat" in got:
         g.hit("sat", *transitions(got["sat"]))
