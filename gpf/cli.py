@@ -8,6 +8,7 @@ line and status 3, its traceback with `gpf --debug`.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tomllib
 from pathlib import Path
@@ -391,6 +392,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     gate = " gate-level netlist" if args.gate else ""
     print(f"gpf sim: {module}{gate} on {args.sim}, config {cfg.name}{note}", flush=True)
     _check_gate_tools(args.gate)
+    if args.coverage:
+        from gpf.sim import CODE_COVERAGE_ENV
+
+        if args.sim != "verilator":
+            raise UsageError("--coverage: Verilator only (its line and toggle counters)")
+        os.environ[CODE_COVERAGE_ENV] = "1"
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                      testcase=args.testcase, gate=args.gate)
     status = "PASSED" if result.passed else "FAILED"
@@ -615,12 +622,40 @@ def cmd_timing(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_coverage(args: argparse.Namespace) -> int:
+    """Merge the runs' functional coverage (and the code coverage of COVERAGE=1 runs) into
+    build/coverage/report.md; 1 if a hole has no reason."""
+    from gpf import code_coverage, coverage
+
+    cov_dir = Path(args.dir)
+    rep = coverage.build_report(cov_dir, Path(args.holes))
+    md, js = coverage.write_report(rep, cov_dir, Path(args.holes))
+    print(rep.summary())
+    for b in rep.unexplained:
+        print(f"  hole without a reason: {b.key}")
+    print(f"  -> {md}, {js}")
+    code = code_coverage.report(cov_dir, Path(args.code_holes))
+    if code is not None:
+        print(code.summary())
+        for line in code.unexplained:
+            print(f"  line not hit and not explained: {line.where}")
+        print(f"  -> {code.paths_text()}")
+    failed = bool(rep.unexplained) or bool(code and code.unexplained)
+    return EXIT_FAILED if failed else 0
+
+
 def cmd_waves(args: argparse.Namespace) -> int:
     from gpf.rtl.waves import open_waves
 
     cfg = _config(args)
     module = _module(args.module or f"gpf_{cfg.app}", cfg)
     return open_waves(cfg, module, args.sim, launch=not args.no_launch)
+
+
+def _holes_default(name: str) -> Path:
+    from gpf.coverage import HOLES
+
+    return HOLES.parent / name
 
 
 def build_parser() -> Parser:
@@ -691,6 +726,8 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
+    p.add_argument("--coverage", action="store_true", help="Verilator with line and toggle "
+                   "coverage (its own build folder); `gpf coverage` reports it")
     with_gate(p)
     p.set_defaults(func=cmd_sim)
 
@@ -751,6 +788,16 @@ def build_parser() -> Parser:
     p = sub.add_parser("limits", help="print every input's validated range (the README's "
                        "\"Inputs and their limits\")")
     p.set_defaults(func=cmd_limits)
+
+    p = sub.add_parser("coverage", help="merge the runs' functional and code coverage: "
+                       "build/coverage/report.md, every bin and line, each hole's reason")
+    p.add_argument("--dir", default="build/coverage", help="where the runs wrote theirs "
+                   "(default build/coverage)")
+    p.add_argument("--holes", default=str(_holes_default("holes.toml")),
+                   help="the reviewed functional holes (bin pattern = reason)")
+    p.add_argument("--code-holes", default=str(_holes_default("code_holes.toml")),
+                   help="the reviewed unhit lines (file, text, reason)")
+    p.set_defaults(func=cmd_coverage)
 
     p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
     with_config(p)

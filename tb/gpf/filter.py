@@ -30,6 +30,7 @@ from gpf.outputs import write_json
 from gpf.rtl.filter import CYCLES_W, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
+from gpf.tb.gpf import coverage as filter_coverage
 from gpf.tb.gpf.ip import Ip
 from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
@@ -256,6 +257,7 @@ class FilterBench:
         await cond.wait(gpf.particles // gpf.cfg.lanes // 2)
         await RisingEdge(self.clk)   # the wait ends in ReadOnly, where nothing may be written
         loop.stop()
+        filter_coverage.sample_reset(self, len(cond.beats))
 
     def init_values(self, mu: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
         """The init beat: N, the raw mu0 and the raw Sigma0 (real sigma0)."""
@@ -336,6 +338,7 @@ class FilterBench:
         loop.stop()
         if self.ip:
             self.check_framing(mons)
+        filter_coverage.sample_run(self, mons, steps_in, sinks)
         assert len(mons["est"]) == steps, "extra result beats"
         assert len(mons["cond"]) == len(mons["part"]) == steps * beats, \
             "extra tap beats"
