@@ -47,10 +47,14 @@ SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 6
 class Target:
     module: str
     config: str
+    lanes: int = 1
 
     @property
     def name(self) -> str:
-        return f"{self.module}/{self.config}"
+        return f"{self.module}/{self.config}" + (f"/lanes{self.lanes}" if self.lanes > 1 else "")
+
+    def load(self):
+        return load_config(f"configs/{self.config}.toml", {"filter.lanes": self.lanes})
 
     @property
     def is_filter(self) -> bool:
@@ -58,12 +62,14 @@ class Target:
 
 
 def targets() -> list[Target]:
-    """Every block with a testbench, in each of its configs, then the two whole filters."""
+    """Every block with a testbench, in each of its configs, at LANES 2 where it has lanes (a
+    mutant of one lane's indexing is equivalent at LANES 1), then the two whole filters."""
     out = []
     for name, mod in MODULES.items():
         if not mod.simulated or mod.made or mod.is_filter:
             continue
-        out += [Target(name, c) for app in mod.apps for c in APP_CONFIGS[app]]
+        out += [Target(name, c, 2 if mod.laned else 1) for app in mod.apps
+                for c in APP_CONFIGS[app]]
     return out + [Target("gpf_bot", "bot"), Target("gpf_uav", "uav")]
 
 
@@ -126,7 +132,7 @@ def assign_targets(mutants: list[Mutant], work: Path) -> dict[str, Target | None
 
 def _render(t: Target, template_dir: Path, out: Path) -> str:
     shutil.rmtree(out, ignore_errors=True)
-    generated = generate(load_config(f"configs/{t.config}.toml"), out, modules=[t.module],
+    generated = generate(t.load(), out, modules=[t.module],
                          template_dir=template_dir)
     return "".join(p.read_text() for p in generated.files[t.module])
 
@@ -153,7 +159,7 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
     from gpf.run import RunArgs, run_filter
     from gpf.sim import run_sim, sim_build_dir
 
-    cfg = load_config(f"configs/{t.config}.toml")
+    cfg = t.load()
     shutil.rmtree(build_root, ignore_errors=True)
     os.environ["TEST_LEVEL"] = level
     try:
@@ -202,7 +208,7 @@ def simulate(t: Target, template_dir: Path, work: Path, level: str,
     """run_one in a child process of its own group, stopped after `limit` seconds."""
     result = work / "result.json"
     result.unlink(missing_ok=True)
-    spec = {"target": [t.module, t.config], "templates": str(template_dir),
+    spec = {"target": [t.module, t.config, t.lanes], "templates": str(template_dir),
             "build": str(work / "build"), "log": str(work / "sim.log"), "level": level,
             "result": str(result)}
     start = time.monotonic()
@@ -362,7 +368,13 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
     """Scan, assign, select, run and report; with `list_only`, print the selection only."""
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
-    mutants = scan_dir(TEMPLATE_DIR)
+    # only the templates the selection can reach: a module's own, a mutant id's
+    names = None
+    if ids:
+        names = sorted({i.split(":")[0] for i in ids})
+    elif module:
+        names = owned_templates(module)
+    mutants = scan_dir(TEMPLATE_DIR, names)
     assigned = assign_targets(mutants, work)
     chosen = select(mutants, assigned, module, ids, sample, seed, shards, shard)
     if list_only:

@@ -22,6 +22,7 @@ _JINJA = re.compile(r"\{\{.*?\}\}|\{%.*?%\}|\{#.*?#\}", re.S)
 _DECLARATION = re.compile(r"^\s*(?:input|output|inout|logic|wire|reg|bit|int|integer|"
                           r"localparam\s+(?:logic|bit)|parameter\s+(?:logic|bit))\b")
 _IDENT = r"[A-Za-z_$][\w$]*"
+_WINDOW = 400   # how far back an lvalue or an operand is looked for
 
 
 @dataclass(frozen=True)
@@ -76,9 +77,8 @@ def mask(text: str) -> str:
             i += 1
             continue
         blank(i, end)
-        masked = "".join(out)
         i = end
-    return masked
+    return "".join(out)
 
 
 def _endif(text: str, start: int) -> int:
@@ -102,10 +102,27 @@ def _brackets(masked: str) -> list[tuple[int, int]]:
     return spans
 
 
+def _cast_widths(masked: str) -> list[tuple[int, int]]:
+    """The widths of casts, `(W+1)'(x)` and `8'(x)`: a type, not a value (a wider cast is
+    truncated back where it is used; a narrower one is a different width, not logic)."""
+    spans = []
+    for m in re.finditer(r"'\(", masked):
+        end = m.start()
+        if masked[end - 1:end] == ")":
+            start = _matching_back(masked, end - 1)
+            if start is not None:
+                spans.append((start, end))
+        else:
+            size = re.search(r"\d+$", masked[max(0, end - 12):end])
+            if size:
+                spans.append((end - len(size.group()), end))
+    return spans
+
+
 def _nonblocking(masked: str, at: int) -> bool:
     """Whether the `<=` at `at` assigns (x_q <= ...) rather than compares: an lvalue (a name,
     indexed, or a concatenation) right after a statement's start."""
-    before = masked[:at].rstrip()
+    before = masked[max(0, at - _WINDOW):at].rstrip()
     lvalue = re.search(r"(?:" + _IDENT + r"(?:\s*\[[^\]]*\])*|\{[^{}]*\})$", before)
     if not lvalue:
         return False
@@ -144,12 +161,16 @@ _BASES = {"d": 10, "b": 2, "h": 16, "o": 8}
 def scan(name: str, text: str) -> list[Mutant]:
     """Every mutant of one template's literal SV, in the order of their sites."""
     masked = mask(text)
-    decl = _brackets(masked)
+    decl = _brackets(masked) + _cast_widths(masked)
     resets = _reset_spans(masked)
     found: list[tuple[int, str, str, str]] = []   # offset, class, before, after
 
+    declared = bytearray(len(masked) + 1)
+    for a, b in decl:
+        declared[a:b] = b"\x01" * (b - a)
+
     def in_decl(at: int) -> bool:
-        return any(a <= at < b for a, b in decl)
+        return bool(declared[at])
 
     for pattern, cls, replacements in _OPERATORS:
         for m in re.finditer(pattern, masked):
@@ -202,7 +223,10 @@ def scan(name: str, text: str) -> list[Mutant]:
     found += _register_holds(masked, text)
     # reset values are not mutated: a datapath register's reset value is overwritten before
     # any valid bit lets it out (a class of equivalent mutants, not of test gaps)
-    found = [f for f in found if f[1] != "const" or not any(a <= f[0] < b for a, b in resets)]
+    in_reset = bytearray(len(masked) + 1)
+    for a, b in resets:
+        in_reset[a:b] = b"\x01" * (b - a)
+    found = [f for f in found if f[1] != "const" or not in_reset[f[0]]]
     return _numbered(name, text, found)
 
 
@@ -226,7 +250,7 @@ def _reset_spans(masked: str) -> list[tuple[int, int]]:
 
 def _in_literal(masked: str, at: int) -> bool:
     """Whether `at` is inside a based literal's digits (4'b1?0 is not an operator)."""
-    m = re.search(r"'s?[dDbBhHoO][0-9a-fA-FxXzZ_?]*$", masked[:at + 1])
+    m = re.search(r"'s?[dDbBhHoO][0-9a-fA-FxXzZ_?]*$", masked[max(0, at - 80):at + 1])
     return m is not None
 
 
@@ -254,11 +278,22 @@ def _negations(masked: str, text: str) -> list[tuple[int, str, str, str]]:
         if masked[end - 1] == ")":
             start = _matching_back(masked, end - 1)
         else:
-            operand = re.search(r"(?:" + _IDENT + r"(?:\[[^\]\n]*\])*)$", masked[:end])
-            start = operand.start() if operand else None
+            base = max(0, end - _WINDOW)
+            operand = re.search(r"(?:" + _IDENT + r"(?:\[[^\]\n]*\])*)$", masked[base:end])
+            start = base + operand.start() if operand else None
         if start is None or start == end or not _clean(text, start, end):
             continue
         if re.match(r"\b(?:if|case)\b", masked[start:end]):
+            continue
+        unary, head = masked[start - 1:start], masked[:start - 1].rstrip()[-1:]
+        if unary in "!~|&^" and unary and (not head or head in "(=?:,{"):
+            if unary == "!":   # !c ? -> c ? (Icarus refuses !!(c))
+                out.append((start - 1, "negate", text[start - 1:end], text[start:end]))
+            else:              # a reduction: |x ? -> !(|x) ?
+                out.append((start - 1, "negate", text[start - 1:end],
+                            f"!({text[start - 1:end]})"))
+            continue
+        if unary in "!~|&^" and unary:
             continue
         out.append((start, "negate", text[start:end], f"!({text[start:end]})"))
     return out
@@ -272,8 +307,10 @@ def _register_holds(masked: str, text: str) -> list[tuple[int, str, str, str]]:
         at = m.start()
         if not _nonblocking(masked, at) or _in_literal(masked, at):
             continue
-        before = masked[:at].rstrip()
-        lvalue = re.search(r"(?:" + _IDENT + r"(?:\s*\[[^\]]*\])*|\{[^{}]*\})$", before)
+        base = max(0, at - _WINDOW)
+        before = masked[base:at].rstrip()
+        found = re.search(r"(?:" + _IDENT + r"(?:\s*\[[^\]]*\])*|\{[^{}]*\})$", before)
+        lvalue = None if found is None else (base + found.start(), base + found.end())
         end = _statement_end(masked, m.end())
         if lvalue is None or end is None:
             continue
@@ -281,9 +318,9 @@ def _register_holds(masked: str, text: str) -> list[tuple[int, str, str, str]]:
         rhs = masked[start:end].strip()
         if not rhs or re.fullmatch(r"(?:'[01]|\d*'s?[dbhoDBHO][0-9a-fA-F_]+|\d+|J+)", rhs):
             continue
-        if not _clean(text, start, end) or not _clean(text, lvalue.start(), lvalue.end()):
+        if not _clean(text, start, end) or not _clean(text, *lvalue):
             continue
-        target = text[lvalue.start():lvalue.end()]
+        target = text[lvalue[0]:lvalue[1]]
         if target.strip() == text[start:end].strip():
             continue
         out.append((start, "reg-hold", text[start:end], target))
