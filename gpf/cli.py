@@ -770,7 +770,8 @@ def build_parser() -> Parser:
     p.add_argument("--shards", type=int, default=1, help="split the selection in k shards")
     p.add_argument("--shard", type=int, default=0, help="run shard i (from 0) of --shards")
     p.add_argument("--level", choices=["short", "default"], default="short",
-                   help="the testbenches' TEST_LEVEL (default short: a fifth of the beats)")
+                   help="the testbenches' TEST_LEVEL (default short: a fifth of the beats; "
+                   "a survivor of short runs again at default)")
     p.add_argument("--out", default="build/mutants", help="report folder (default "
                    "build/mutants)")
     p.add_argument("--list", action="store_true", help="list the selected mutants, run none")
