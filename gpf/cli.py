@@ -542,6 +542,14 @@ def cmd_mutants(args: argparse.Namespace) -> int:
         raise UsageError(f"--sample {args.sample}: choose 1 or more")
     if not args.list:
         check_simulator(SIM, False)
+    if args.survivors:
+        from gpf.mutants import rerun_survivors
+
+        if not Path(args.survivors).is_file():
+            raise UsageError(f"--survivors {args.survivors}: no such report (report.json of "
+                             "an earlier gpf mutants)")
+        print(f"-> {rerun_survivors(Path(args.survivors), args.level)}")
+        return 0
     command = "gpf mutants " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
     campaign(args.module, args.mutant, args.sample, args.seed, args.shards, args.shard,
              args.level, Path(args.out), args.list, command.strip())
@@ -775,6 +783,8 @@ def build_parser() -> Parser:
     p.add_argument("--out", default="build/mutants", help="report folder (default "
                    "build/mutants)")
     p.add_argument("--list", action="store_true", help="list the selected mutants, run none")
+    p.add_argument("--survivors", metavar="REPORT_JSON", help="run the survivors of an "
+                   "earlier report again (testbenches strengthened since) and update it")
     p.set_defaults(func=cmd_mutants)
 
     p = sub.add_parser("limits", help="print every input's validated range (the README's "

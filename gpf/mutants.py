@@ -29,7 +29,7 @@ from pathlib import Path
 import jinja2
 import jinja2.meta
 
-from gpf.config import load_config
+from gpf.config import config_path, load_config
 from gpf.outputs import atomic_write_text
 from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
 from gpf.rtl.mutate import Mutant, scan_dir
@@ -38,8 +38,12 @@ EQUIVALENT_FILE = Path(__file__).resolve().parent.parent / "tests/data/mutants/e
 # the configs a block's mutants may need: its application's default, then odd words (and, for
 # bot, ecp5's shapes); the first whose RTL holds the mutated text is the mutant's
 APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
-# the whole filter's run for a top's mutant: as tests/test_sim_filter.py's mutants
+# the whole filter's runs for a top's mutant, each only if it survived the one before: a short
+# run (as tests/test_sim_filter.py's mutants), then runs that raise the flags the first never
+# does: every step below the ESS threshold, an outlier measurement, a target out of range
 FILTER_RUN = {"steps": 5, "particles": 32}
+FILTER_ESCALATION = ((None, {}), (None, {"filter.ess_min": 1}), ("bot_outlier", {}),
+                     ("bot_far_target", {}))
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
 
@@ -54,7 +58,7 @@ class Target:
         return f"{self.module}/{self.config}" + (f"/lanes{self.lanes}" if self.lanes > 1 else "")
 
     def load(self):
-        return load_config(f"configs/{self.config}.toml", {"filter.lanes": self.lanes})
+        return load_config(config_path(self.config), {"filter.lanes": self.lanes})
 
     @property
     def is_filter(self) -> bool:
@@ -164,12 +168,18 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
     os.environ["TEST_LEVEL"] = level
     try:
         if t.is_filter:
-            res = run_filter(cfg, RunArgs(FILTER_RUN["steps"], FILTER_RUN["particles"], 1, None,
-                                          SIM, False), progress=False, build_root=build_root,
-                             template_dir=template_dir)
-            return (("survived", "the whole filter passed") if res["passed"] else
-                    ("killed", f"{res['mismatches']} mismatches, first: "
-                               f"{res.get('first_mismatch')}"))
+            runs = [(sc, o) for sc, o in FILTER_ESCALATION if sc is None or sc.startswith(cfg.app)]
+            for scenario, overrides in runs:
+                run_cfg = load_config(config_path(t.config), {"filter.lanes": t.lanes,
+                                                              **overrides})
+                res = run_filter(run_cfg, RunArgs(FILTER_RUN["steps"], FILTER_RUN["particles"],
+                                                  1, scenario, SIM, False),
+                                 progress=False, build_root=build_root, template_dir=template_dir)
+                if not res["passed"]:
+                    return "killed", (f"scenario {scenario or 'default'} {overrides or ''}: "
+                                      f"{res['mismatches']} mismatches, first: "
+                                      f"{res.get('first_mismatch')}")
+            return "survived", f"the whole filter passed {len(runs)} runs"
         res = run_sim(cfg, t.module, SIM, seed=1, template_dir=template_dir,
                       build_root=build_root, log_file=log, all_modules=False,
                       extra_env={"TEST_LEVEL": level, "GPF_FAIL_FAST": "1"})
@@ -282,7 +292,8 @@ def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work
         original = (TEMPLATE_DIR / mu.template).read_text()
         (templates / mu.template).write_text(mu.apply(original))
         try:
-            limit = max(60.0, 8 * camp.baseline[t.name])
+            # the testbenches' own timeouts allow several times a run's length
+            limit = max(60.0, 20 * camp.baseline[t.name])
             status, detail, seconds = simulate(t, templates, work, level, limit)
             if status == "survived" and level == "short" and not t.is_filter:
                 # a fifth of the beats let it through: the testbench's own default run decides
@@ -401,6 +412,35 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
         f"equivalent {r['equivalent']}, score {r['score_pct']} %, unexplained "
         f"{r['unexplained']}, stillborn {r['stillborn']}")
     log(f"-> {md_path}, {json_path}")
+    return md_path
+
+
+def rerun_survivors(report: Path, level: str = "short", log=print) -> Path:
+    """Run a report's survivors (and hung mutants) again, with the testbenches and the list of
+    equivalents as they are now, and write the report back with their new verdicts (a killed
+    mutant is not run again: strengthening a testbench adds checks, it removes none)."""
+    data = json.loads(report.read_text())
+    verdicts = [Verdict(**v) for v in data["verdicts"]]
+    ids = [v.id for v in verdicts if v.status in ("survived", "hung")]
+    out = report.parent
+    work = out / "work"
+    work.mkdir(parents=True, exist_ok=True)
+    mutants = scan_dir(TEMPLATE_DIR, sorted({i.split(":")[0] for i in ids}))
+    by_id = {mu.id: mu for mu in mutants}
+    missing = [i for i in ids if i not in by_id]
+    if missing:
+        raise RuntimeError(f"{report}: mutants no longer in the templates (a line changed; "
+                           f"run the campaign again): {', '.join(missing)}")
+    chosen = [by_id[i] for i in ids]
+    assigned = assign_targets(chosen, work)
+    log(f"gpf mutants: {len(chosen)} survivors of {report} again, level {level}, {SIM}")
+    again = {v.id: v for v in run_campaign(chosen, assigned, work, level, log).verdicts}
+    camp = Campaign([again.get(v.id, v) for v in verdicts], data["unreached"],
+                    data["total_mutants"], data["baseline_seconds"])
+    command = data["command"].split("; survivors run again")[0] + \
+        f"; survivors run again: gpf mutants --survivors {report}"
+    _, md_path = write_report(camp, out, command)
+    shutil.rmtree(work, ignore_errors=True)
     return md_path
 
 

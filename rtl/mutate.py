@@ -277,6 +277,8 @@ def _negations(masked: str, text: str) -> list[tuple[int, str, str, str]]:
         end = len(masked[:m.start()].rstrip())
         if masked[end - 1] == ")":
             start = _matching_back(masked, end - 1)
+            if start is not None and masked[start - 1:start] == "'":
+                continue   # a cast's operand: (W)'(x) ? -- its width is not negated
         else:
             base = max(0, end - _WINDOW)
             operand = re.search(r"(?:" + _IDENT + r"(?:\[[^\]\n]*\])*)$", masked[base:end])
