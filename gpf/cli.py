@@ -548,7 +548,7 @@ def cmd_mutants(args: argparse.Namespace) -> int:
         if not Path(args.survivors).is_file():
             raise UsageError(f"--survivors {args.survivors}: no such report (report.json of "
                              "an earlier gpf mutants)")
-        print(f"-> {rerun_survivors(Path(args.survivors), args.level)}")
+        print(f"-> {rerun_survivors(Path(args.survivors), args.level, mark_only=args.mark_only)}")
         return 0
     command = "gpf mutants " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
     campaign(args.module, args.mutant, args.sample, args.seed, args.shards, args.shard,
@@ -785,6 +785,8 @@ def build_parser() -> Parser:
     p.add_argument("--list", action="store_true", help="list the selected mutants, run none")
     p.add_argument("--survivors", metavar="REPORT_JSON", help="run the survivors of an "
                    "earlier report again (testbenches strengthened since) and update it")
+    p.add_argument("--mark-only", action="store_true", help="with --survivors: run nothing, "
+                   "mark the survivors from tests/data/mutants/equivalent.toml again")
     p.set_defaults(func=cmd_mutants)
 
     p = sub.add_parser("limits", help="print every input's validated range (the README's "

@@ -276,7 +276,6 @@ def unified_diff(mu: Mutant) -> str:
 def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work: Path,
                  level: str = "short", log=print) -> Campaign:
     camp = Campaign()
-    eq = equivalents()
     templates = work / "templates"
     shutil.rmtree(templates, ignore_errors=True)
     shutil.copytree(TEMPLATE_DIR, templates)
@@ -302,20 +301,28 @@ def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work
                 seconds += more
         finally:
             (templates / mu.template).write_text(original)
-        entry = eq.get(mu.id)
-        reason = None
-        if entry and status in ("survived", "hung"):
-            stale = entry.get("before") != mu.before or entry.get("after") != mu.after
-            reason = ("STALE (the entry's text is not this mutant's): " if stale else "") + \
-                entry["reason"]
-        camp.verdicts.append(Verdict(mu.id, t.name, status, detail, round(seconds, 1), reason,
-                                     mu.before, mu.after, mu.cls,
-                                     unified_diff(mu) if status in ("survived", "hung") else ""))
+        camp.verdicts.append(mark(Verdict(mu.id, t.name, status, detail, round(seconds, 1),
+                                          None, mu.before, mu.after, mu.cls,
+                                          unified_diff(mu) if status in ("survived", "hung")
+                                          else "")))
+        reason = camp.verdicts[-1].equivalent
         log(f"[{n}/{len(mutants)}] {mu.id} ({t.name}): {status}"
             f"{' (equivalent)' if reason and not reason.startswith('STALE') else ''}"
             f" {seconds:.1f} s")
     shutil.rmtree(templates)
     return camp
+
+
+def mark(v: Verdict, eq: dict[str, dict] | None = None) -> Verdict:
+    """A survivor's reason from the reviewed list of equivalents (read afresh: entries are
+    added while a campaign runs), flagged STALE if the entry's text is not the mutant's."""
+    entry = (equivalents() if eq is None else eq).get(v.id)
+    v.equivalent = None
+    if entry and v.status in ("survived", "hung"):
+        stale = entry.get("before") != v.before or entry.get("after") != v.after
+        v.equivalent = ("STALE (the entry's text is not this mutant's): " if stale else "") + \
+            entry["reason"]
+    return v
 
 
 def scores(camp: Campaign) -> dict[str, dict]:
@@ -415,13 +422,23 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
     return md_path
 
 
-def rerun_survivors(report: Path, level: str = "short", log=print) -> Path:
-    """Run a report's survivors (and hung mutants) again, with the testbenches and the list of
-    equivalents as they are now, and write the report back with their new verdicts (a killed
-    mutant is not run again: strengthening a testbench adds checks, it removes none)."""
+def rerun_survivors(report: Path, level: str = "short", log=print,
+                    mark_only: bool = False) -> Path:
+    """Run a report's survivors (and hung mutants) that the list of equivalents does not
+    explain again, with the testbenches as they are now, and write the report back with their
+    new verdicts and every survivor marked from the list (a killed mutant is not run again:
+    strengthening a testbench adds checks, it removes none)."""
     data = json.loads(report.read_text())
     verdicts = [Verdict(**v) for v in data["verdicts"]]
     ids = [v.id for v in verdicts if v.status in ("survived", "hung")]
+    if mark_only:   # the list of equivalents reviewed since: the report's marks again
+        eq = equivalents()
+        camp = Campaign([mark(v, eq) for v in verdicts], data["unreached"],
+                        data["total_mutants"], data["baseline_seconds"])
+        return write_report(camp, report.parent, data["command"])[1]
+    # those the list explains would survive again: the others run
+    eq = equivalents()
+    ids = [i for i in ids if i not in eq]
     out = report.parent
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
@@ -435,7 +452,7 @@ def rerun_survivors(report: Path, level: str = "short", log=print) -> Path:
     assigned = assign_targets(chosen, work)
     log(f"gpf mutants: {len(chosen)} survivors of {report} again, level {level}, {SIM}")
     again = {v.id: v for v in run_campaign(chosen, assigned, work, level, log).verdicts}
-    camp = Campaign([again.get(v.id, v) for v in verdicts], data["unreached"],
+    camp = Campaign([mark(again.get(v.id, v), eq) for v in verdicts], data["unreached"],
                     data["total_mutants"], data["baseline_seconds"])
     command = data["command"].split("; survivors run again")[0] + \
         f"; survivors run again: gpf mutants --survivors {report}"
