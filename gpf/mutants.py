@@ -274,7 +274,7 @@ def unified_diff(mu: Mutant) -> str:
 
 
 def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work: Path,
-                 level: str = "short", log=print) -> Campaign:
+                 level: str = "short", log=print, on_verdict=None) -> Campaign:
     camp = Campaign()
     templates = work / "templates"
     shutil.rmtree(templates, ignore_errors=True)
@@ -305,6 +305,8 @@ def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work
                                           None, mu.before, mu.after, mu.cls,
                                           unified_diff(mu) if status in ("survived", "hung")
                                           else "")))
+        if on_verdict is not None:
+            on_verdict(camp.verdicts[-1])
         reason = camp.verdicts[-1].equivalent
         log(f"[{n}/{len(mutants)}] {mu.id} ({t.name}): {status}"
             f"{' (equivalent)' if reason and not reason.startswith('STALE') else ''}"
@@ -448,14 +450,23 @@ def rerun_survivors(report: Path, level: str = "short", log=print,
     if missing:
         raise RuntimeError(f"{report}: mutants no longer in the templates (a line changed; "
                            f"run the campaign again): {', '.join(missing)}")
-    chosen = [by_id[i] for i in ids]
+    # the hung last: each may take its whole time limit
+    hung = {v.id for v in verdicts if v.status == "hung"}
+    chosen = sorted((by_id[i] for i in ids), key=lambda mu: mu.id in hung)
     assigned = assign_targets(chosen, work)
     log(f"gpf mutants: {len(chosen)} survivors of {report} again, level {level}, {SIM}")
-    again = {v.id: v for v in run_campaign(chosen, assigned, work, level, log).verdicts}
-    camp = Campaign([mark(again.get(v.id, v), eq) for v in verdicts], data["unreached"],
-                    data["total_mutants"], data["baseline_seconds"])
     command = data["command"].split("; survivors run again")[0] + \
         f"; survivors run again: gpf mutants --survivors {report}"
+    again: dict[str, Verdict] = {}
+
+    def update(v: Verdict) -> None:   # the report rewritten after each: an interrupted run
+        again[v.id] = v                # keeps what it did
+        write_report(Campaign([mark(again.get(u.id, u)) for u in verdicts], data["unreached"],
+                              data["total_mutants"], data["baseline_seconds"]), out, command)
+
+    run_campaign(chosen, assigned, work, level, log, on_verdict=update)
+    camp = Campaign([mark(again.get(v.id, v), eq) for v in verdicts], data["unreached"],
+                    data["total_mutants"], data["baseline_seconds"])
     _, md_path = write_report(camp, out, command)
     shutil.rmtree(work, ignore_errors=True)
     return md_path
