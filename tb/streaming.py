@@ -90,9 +90,7 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
                     op=dut.op if block.fields_op else None)
     mon_out = Sink(dut, "m_axis", stall_out, b.rng(f"{tag}-ready"))
     loop = StreamLoop(dut.clk, [mon_in, mon_out])
-    # at worst (70 % stalls on one side) a run takes ~3.3x its beats' clocks: 15x leaves a wide
-    # margin, and a mutant that stops the stream fails in a few times a run, not fifty
-    limit = 15 * (len(lasts) + n) * block.interval + 100 + 10 * block.latency
+    limit = 50 * (len(lasts) + n) * block.interval + 100 + 10 * block.latency
     timeout = Timer(limit * CLOCK_NS, "ns")
     if await First(Combine(mon_in.done.wait(), mon_out.wait(n)), timeout) is timeout:
         raise AssertionError(f"{block.name}: {len(mon_in.beats)} of {len(lasts)} beats went "
