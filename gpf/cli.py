@@ -537,6 +537,32 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_mutants(args: argparse.Namespace) -> int:
+    from gpf.mutants import SIM, campaign, targets
+
+    names = sorted({t.module for t in targets()})
+    if args.module and args.module not in names:
+        raise UsageError(f"--module {args.module!r}: choose one of {', '.join(names)}")
+    if not 0 <= args.shard < args.shards:
+        raise UsageError(f"--shard {args.shard}: choose 0 to {args.shards - 1} (--shards)")
+    if args.sample is not None and args.sample < 1:
+        raise UsageError(f"--sample {args.sample}: choose 1 or more")
+    if not args.list:
+        check_simulator(SIM, False)
+    if args.survivors:
+        from gpf.mutants import rerun_survivors
+
+        if not Path(args.survivors).is_file():
+            raise UsageError(f"--survivors {args.survivors}: no such report (report.json of "
+                             "an earlier gpf mutants)")
+        print(f"-> {rerun_survivors(Path(args.survivors), args.level, mark_only=args.mark_only)}")
+        return 0
+    command = "gpf mutants " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
+    campaign(args.module, args.mutant, args.sample, args.seed, args.shards, args.shard,
+             args.level, Path(args.out), args.list, command.strip())
+    return 0
+
+
 def cmd_limits(args: argparse.Namespace) -> int:
     """The README's "Inputs and their limits", from the code that checks them."""
     from gpf.config import limits_table
@@ -784,6 +810,26 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("list", help="print every module name that `make sim MODULE=` accepts")
     p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("mutants", help="mutation testing: mutants of the templates' literal "
+                       "SystemVerilog, each against its block's testbench (Icarus)")
+    p.add_argument("--module", help="only the mutants of this block or whole filter")
+    p.add_argument("--mutant", action="append", help="only this mutant id (repeatable)")
+    p.add_argument("--sample", type=int, help="a random subset of this many mutants")
+    p.add_argument("--seed", type=int, default=1, help="the sample's seed (default 1)")
+    p.add_argument("--shards", type=int, default=1, help="split the selection in k shards")
+    p.add_argument("--shard", type=int, default=0, help="run shard i (from 0) of --shards")
+    p.add_argument("--level", choices=["short", "default"], default="short",
+                   help="the testbenches' TEST_LEVEL (default short: a fifth of the beats; "
+                   "a survivor of short runs again at default)")
+    p.add_argument("--out", default="build/mutants", help="report folder (default "
+                   "build/mutants)")
+    p.add_argument("--list", action="store_true", help="list the selected mutants, run none")
+    p.add_argument("--survivors", metavar="REPORT_JSON", help="run the survivors of an "
+                   "earlier report again (testbenches strengthened since) and update it")
+    p.add_argument("--mark-only", action="store_true", help="with --survivors: run nothing, "
+                   "mark the survivors from tests/data/mutants/equivalent.toml again")
+    p.set_defaults(func=cmd_mutants)
 
     p = sub.add_parser("limits", help="print every input's validated range (the README's "
                        "\"Inputs and their limits\")")
