@@ -109,7 +109,7 @@ def _cast_widths(masked: str) -> list[tuple[int, int]]:
     for m in re.finditer(r"'\(", masked):
         end = m.start()
         if masked[end - 1:end] == ")":
-            start = _matching_back(masked, end - 1)
+            start = _matching(masked, end - 1, -1)
             if start is not None:
                 spans.append((start, end))
         else:
@@ -276,7 +276,7 @@ def _negations(masked: str, text: str) -> list[tuple[int, str, str, str]]:
             continue
         end = len(masked[:m.start()].rstrip())
         if masked[end - 1] == ")":
-            start = _matching_back(masked, end - 1)
+            start = _matching(masked, end - 1, -1)
             if start is not None and masked[start - 1:start] == "'":
                 continue   # a cast's operand: (W)'(x) ? -- its width is not negated
         else:
@@ -336,24 +336,15 @@ def _clean(text: str, a: int, b: int) -> bool:
     return not any(tag in span for tag in ("{%", "%}", "{#", "#}"))
 
 
-def _matching(masked: str, open_at: int) -> int | None:
+def _matching(masked: str, at: int, step: int = 1) -> int | None:
+    """The parenthesis matching the one at `at`: searching forward from a "(" (step 1) or back
+    from a ")" (step -1)."""
+    inward, outward = ("(", ")") if step == 1 else (")", "(")
     depth = 0
-    for i in range(open_at, len(masked)):
-        if masked[i] == "(":
+    for i in range(at, len(masked) if step == 1 else -1, step):
+        if masked[i] == inward:
             depth += 1
-        elif masked[i] == ")":
-            depth -= 1
-            if depth == 0:
-                return i
-    return None
-
-
-def _matching_back(masked: str, close_at: int) -> int | None:
-    depth = 0
-    for i in range(close_at, -1, -1):
-        if masked[i] == ")":
-            depth += 1
-        elif masked[i] == "(":
+        elif masked[i] == outward:
             depth -= 1
             if depth == 0:
                 return i
