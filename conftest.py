@@ -33,6 +33,9 @@ def pytest_addoption(parser) -> None:
                      help="split the selected tests into this many shards (make regress SHARDS=)")
     parser.addoption("--shard", type=int, default=0,
                      help="run shard i of --shards, 0-based (make regress SHARD=)")
+    parser.addoption("--coverage-report", action="store_true",
+                     help="at the end, merge build/coverage/ and report it (gpf coverage); "
+                     "with one shard, a hole without a reason fails the session")
 
 
 # The stall campaign comes in pieces of its particle budget, two a shard (pytest -n 2: both of a
@@ -108,3 +111,18 @@ def pytest_configure(config) -> None:
             f"pytest {pytest.__version__} breaks pytest-xdist's --dist loadgroup (pytest-xdist "
             "issue 1386: tests of one build folder would run on two workers at once); "
             "install the pinned versions: make venv")
+
+
+def pytest_sessionfinish(session, exitstatus) -> None:
+    """--coverage-report (make regress, make coverage-runs): the coverage of every run so far,
+    reported once by the controller (not by each pytest -n worker, nor on --collect-only)."""
+    config = session.config
+    if not config.getoption("coverage_report") or config.getoption("collectonly") \
+            or hasattr(config, "workerinput"):
+        return
+    from gpf.cli import main as gpf_main
+
+    print("\n", flush=True)
+    code = gpf_main(["coverage"])
+    if code and config.getoption("shards") == 1 and session.exitstatus == 0:
+        session.exitstatus = code

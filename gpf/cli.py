@@ -8,6 +8,7 @@ line and status 3, its traceback with `gpf --debug`.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tomllib
 from pathlib import Path
@@ -391,6 +392,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     gate = " gate-level netlist" if args.gate else ""
     print(f"gpf sim: {module}{gate} on {args.sim}, config {cfg.name}{note}", flush=True)
     _check_gate_tools(args.gate)
+    if args.coverage:
+        from gpf.sim import CODE_COVERAGE_ENV
+
+        if args.sim != "verilator":
+            raise UsageError("--coverage: Verilator only (its line and toggle counters)")
+        os.environ[CODE_COVERAGE_ENV] = "1"
     result = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                      testcase=args.testcase, gate=args.gate)
     status = "PASSED" if result.passed else "FAILED"
@@ -530,6 +537,32 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_mutants(args: argparse.Namespace) -> int:
+    from gpf.mutants import SIM, campaign, targets
+
+    names = sorted({t.module for t in targets()})
+    if args.module and args.module not in names:
+        raise UsageError(f"--module {args.module!r}: choose one of {', '.join(names)}")
+    if not 0 <= args.shard < args.shards:
+        raise UsageError(f"--shard {args.shard}: choose 0 to {args.shards - 1} (--shards)")
+    if args.sample is not None and args.sample < 1:
+        raise UsageError(f"--sample {args.sample}: choose 1 or more")
+    if not args.list:
+        check_simulator(SIM, False)
+    if args.survivors:
+        from gpf.mutants import rerun_survivors
+
+        if not Path(args.survivors).is_file():
+            raise UsageError(f"--survivors {args.survivors}: no such report (report.json of "
+                             "an earlier gpf mutants)")
+        print(f"-> {rerun_survivors(Path(args.survivors), args.level, mark_only=args.mark_only)}")
+        return 0
+    command = "gpf mutants " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
+    campaign(args.module, args.mutant, args.sample, args.seed, args.shards, args.shard,
+             args.level, Path(args.out), args.list, command.strip())
+    return 0
+
+
 def cmd_limits(args: argparse.Namespace) -> int:
     """The README's "Inputs and their limits", from the code that checks them."""
     from gpf.config import limits_table
@@ -597,6 +630,10 @@ def cmd_timing(args: argparse.Namespace) -> int:
         print(f"  DSP registers: {d['inputs']} operands and {d['outputs']} products of "
               f"{d['dsps']} MULT18X18D registered inside ({d['flops_removed']} flip-flops "
               "moved out of the fabric)")
+    if t.bram_registers:
+        r = t.bram_registers
+        print(f"  block RAM registers: {r['ports']} of {r['rams']} DP16KD read with their output "
+              f"register ({r['flops_removed']} flip-flops moved out of the fabric)")
     print(f"  Fmax {t.fmax_mhz:.1f} MHz (target {t.target_mhz:g}: "
           f"{'met' if t.fmax_mhz >= t.target_mhz else 'NOT met'})")
     print(f"  critical path: {t.path_from} -> {t.path_to}, {t.logic_cells} logic cells "
@@ -611,12 +648,40 @@ def cmd_timing(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_coverage(args: argparse.Namespace) -> int:
+    """Merge the runs' functional coverage (and the code coverage of COVERAGE=1 runs) into
+    build/coverage/report.md; 1 if a hole has no reason."""
+    from gpf import code_coverage, coverage
+
+    cov_dir = Path(args.dir)
+    rep = coverage.build_report(cov_dir, Path(args.holes))
+    md, js = coverage.write_report(rep, cov_dir, Path(args.holes))
+    print(rep.summary())
+    for b in rep.unexplained:
+        print(f"  hole without a reason: {b.key}")
+    print(f"  -> {md}, {js}")
+    code = code_coverage.report(cov_dir, Path(args.code_holes))
+    if code is not None:
+        print(code.summary())
+        for line in code.unexplained:
+            print(f"  line not hit and not explained: {line.where}")
+        print(f"  -> {code.paths_text()}")
+    failed = bool(rep.unexplained) or bool(code and code.unexplained)
+    return EXIT_FAILED if failed else 0
+
+
 def cmd_waves(args: argparse.Namespace) -> int:
     from gpf.rtl.waves import open_waves
 
     cfg = _config(args)
     module = _module(args.module or f"gpf_{cfg.app}", cfg)
     return open_waves(cfg, module, args.sim, launch=not args.no_launch)
+
+
+def _holes_default(name: str) -> Path:
+    from gpf.coverage import HOLES
+
+    return HOLES.parent / name
 
 
 def build_parser() -> Parser:
@@ -687,6 +752,8 @@ def build_parser() -> Parser:
     p.add_argument("--waves", action="store_true", help="write an FST under build/")
     p.add_argument("--seed", type=int, help="replay a run (printed by every run)")
     p.add_argument("--testcase", help="run only this cocotb test")
+    p.add_argument("--coverage", action="store_true", help="Verilator with line and toggle "
+                   "coverage (its own build folder); `gpf coverage` reports it")
     with_gate(p)
     p.set_defaults(func=cmd_sim)
 
@@ -729,8 +796,9 @@ def build_parser() -> Parser:
                    help="nextpnr's placement seed (default 1; another seed places in "
                    "build/<config>/timing/<module>-seed<n>: several run side by side)")
     p.add_argument("--fabric-dsp-registers", action="store_true",
-                   help="leave the multipliers' registers in the fabric, as synth_ecp5 maps "
-                   "them (default: moved into each MULT18X18D, as a vendor flow does)")
+                   help="leave the multipliers' and block RAMs' registers in the fabric, as "
+                   "synth_ecp5 maps them (default: moved into each MULT18X18D and DP16KD, as a "
+                   "vendor flow does)")
     p.set_defaults(func=cmd_timing)
 
     p = sub.add_parser("lint", help="lint every generated file (Verilator, slang, Icarus)")
@@ -743,9 +811,39 @@ def build_parser() -> Parser:
     p = sub.add_parser("list", help="print every module name that `make sim MODULE=` accepts")
     p.set_defaults(func=cmd_list)
 
+    p = sub.add_parser("mutants", help="mutation testing: mutants of the templates' literal "
+                       "SystemVerilog, each against its block's testbench (Icarus)")
+    p.add_argument("--module", help="only the mutants of this block or whole filter")
+    p.add_argument("--mutant", action="append", help="only this mutant id (repeatable)")
+    p.add_argument("--sample", type=int, help="a random subset of this many mutants")
+    p.add_argument("--seed", type=int, default=1, help="the sample's seed (default 1)")
+    p.add_argument("--shards", type=int, default=1, help="split the selection in k shards")
+    p.add_argument("--shard", type=int, default=0, help="run shard i (from 0) of --shards")
+    p.add_argument("--level", choices=["short", "default"], default="short",
+                   help="the testbenches' TEST_LEVEL (default short: a fifth of the beats; "
+                   "a survivor of short runs again at default)")
+    p.add_argument("--out", default="build/mutants", help="report folder (default "
+                   "build/mutants)")
+    p.add_argument("--list", action="store_true", help="list the selected mutants, run none")
+    p.add_argument("--survivors", metavar="REPORT_JSON", help="run the survivors of an "
+                   "earlier report again (testbenches strengthened since) and update it")
+    p.add_argument("--mark-only", action="store_true", help="with --survivors: run nothing, "
+                   "mark the survivors from tests/data/mutants/equivalent.toml again")
+    p.set_defaults(func=cmd_mutants)
+
     p = sub.add_parser("limits", help="print every input's validated range (the README's "
                        "\"Inputs and their limits\")")
     p.set_defaults(func=cmd_limits)
+
+    p = sub.add_parser("coverage", help="merge the runs' functional and code coverage: "
+                       "build/coverage/report.md, every bin and line, each hole's reason")
+    p.add_argument("--dir", default="build/coverage", help="where the runs wrote theirs "
+                   "(default build/coverage)")
+    p.add_argument("--holes", default=str(_holes_default("holes.toml")),
+                   help="the reviewed functional holes (bin pattern = reason)")
+    p.add_argument("--code-holes", default=str(_holes_default("code_holes.toml")),
+                   help="the reviewed unhit lines (file, text, reason)")
+    p.set_defaults(func=cmd_coverage)
 
     p = sub.add_parser("waves", help="open a module's last FST in GTKWave with a .gtkw")
     with_config(p)

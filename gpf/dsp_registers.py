@@ -41,32 +41,32 @@ class Packed:
         self.refused[reason] = self.refused.get(reason, 0) + 1
 
 
-def _param(cell: dict, name: str, default: str = "") -> str:
+def param(cell: dict, name: str, default: str = "") -> str:
     return str(cell["parameters"].get(name, default)).strip()
 
 
 def _plain_flop(cell: dict) -> bool:
     """A flip-flop a DSP register can stand in for: rising clock, no set, and a reset (if
     any) synchronous, to 0 and over the enable."""
-    if cell["type"] != "TRELLIS_FF" or _param(cell, "CLKMUX", "CLK") != "CLK":
+    if cell["type"] != "TRELLIS_FF" or param(cell, "CLKMUX", "CLK") != "CLK":
         return False
-    enable = _param(cell, "CEMUX", "1")
+    enable = param(cell, "CEMUX", "1")
     if enable not in ("1", "CE"):
         return False
     if cell["connections"].get("LSR", ["0"]) == ["0"]:
         return True
-    return (_param(cell, "LSRMUX", "LSR") == "LSR"
-            and _param(cell, "REGSET", "RESET") == "RESET"
-            and _param(cell, "SRMODE", "LSR_OVER_CE") == "LSR_OVER_CE")
+    return (param(cell, "LSRMUX", "LSR") == "LSR"
+            and param(cell, "REGSET", "RESET") == "RESET"
+            and param(cell, "SRMODE", "LSR_OVER_CE") == "LSR_OVER_CE")
 
 
 def _control(cell: dict) -> list:
     """What a DSP register must share with the flip-flop: clock, enable, reset."""
-    enable = cell["connections"]["CE"] if _param(cell, "CEMUX", "1") == "CE" else ["1"]
+    enable = cell["connections"]["CE"] if param(cell, "CEMUX", "1") == "CE" else ["1"]
     return [cell["connections"]["CLK"], enable, cell["connections"].get("LSR", ["0"])]
 
 
-def _from_a_flop(net: _Netlist, flop: dict) -> bool:
+def _from_a_flop(net: Netlist, flop: dict) -> bool:
     """The flip-flop's input is another flip-flop's output (or a constant): moving it into the
     DSP leaves a register-to-register hop to the DSP. With logic before it, the logic's path
     would end at the DSP column instead of beside the logic, and be the longer for it."""
@@ -82,7 +82,7 @@ def _clears_a_one(control: list, bits: list) -> bool:
     return control[2] != ["0"] and "1" in bits
 
 
-class _Netlist:
+class Netlist:
     def __init__(self, module: dict):
         self.cells = module["cells"]
         self.driver: dict[int, tuple[str, str]] = {}
@@ -112,7 +112,7 @@ def _same(values: list) -> bool:
     return all(v == values[0] for v in values)
 
 
-def _input_register(net: _Netlist, dsp: dict, side: str, clock: list | None, stats: Packed
+def _input_register(net: Netlist, dsp: dict, side: str, clock: list | None, stats: Packed
                     ) -> tuple[list, list[tuple[str, list, str]]] | None:
     """Whether operand `side` can take its register (on `clock`, if the DSP has one already):
     the register's (clock, enable, reset) and, per pin, the flip-flop input it would then read
@@ -144,7 +144,7 @@ def _input_register(net: _Netlist, dsp: dict, side: str, clock: list | None, sta
     return controls[0], moves
 
 
-def _pack_output(net: _Netlist, dsp: dict, stats: Packed) -> tuple[list | None, list[str]]:
+def _pack_output(net: Netlist, dsp: dict, stats: Packed) -> tuple[list | None, list[str]]:
     """Give the product its register; returns its (clock, enable) and the flip-flops to go."""
     moves = []
     for i in range(PRODUCT):
@@ -182,7 +182,7 @@ def pack_dsp_registers(netlist: dict) -> Packed:
         dsps = [c for c in module["cells"].values() if c["type"] == "MULT18X18D"]
         stats.dsps += len(dsps)
         used: dict[int, list[tuple[str, list]]] = {id(d): [] for d in dsps}  # register, control
-        net = _Netlist(module)
+        net = Netlist(module)
         gone: set[str] = set()
         for dsp in dsps:
             reg, flops = _pack_output(net, dsp, stats)
@@ -191,7 +191,7 @@ def pack_dsp_registers(netlist: dict) -> Packed:
                 gone.update(flops)
         for name in gone:
             del module["cells"][name]
-        net = _Netlist(module)
+        net = Netlist(module)
         sources: set[str] = set()
         for dsp in dsps:
             # both operands or neither: nextpnr times a MULT18X18D with one input register as
@@ -211,7 +211,7 @@ def pack_dsp_registers(netlist: dict) -> Packed:
                 _configure(dsp, used[id(dsp)])
             stats.inputs += sum(r != "OUTPUT" for r, _ in used[id(dsp)])
             stats.outputs += any(r == "OUTPUT" for r, _ in used[id(dsp)])
-        net = _Netlist(module)
+        net = Netlist(module)
         idle = {s for s in sources if not any(net.loads.get(b) for b in
                                               module["cells"][s]["connections"]["Q"])}
         for name in idle:

@@ -33,9 +33,11 @@ class RunArgs:
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
-               build_root: Path = Path("build")) -> dict[str, Any]:
+               build_root: Path = Path("build"),
+               template_dir: Path | None = None) -> dict[str, Any]:
     """Run gpf_<app>'s test_filter with these settings; return its results with the run's
-    settings, wall time and speed added."""
+    settings, wall time and speed added. `template_dir`: other templates (a mutant's), built
+    in a `build_root` of their own: only the filter's modules are generated."""
     module = f"gpf_{cfg.app}_axi" if args.ip else f"gpf_{cfg.app}"
     work = sim_build_dir((build_root / cfg.name).resolve(), args.sim, module,
                          "gate" if args.gate else None)
@@ -55,7 +57,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     def simulate() -> None:
         result["sim"] = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                                 testcase="test_filter", extra_env={"GPF_RUN": json.dumps(spec)},
-                                log_file=log, build_root=build_root, gate=args.gate)
+                                log_file=log, build_root=build_root, gate=args.gate,
+                                template_dir=template_dir, all_modules=template_dir is None)
 
     start = time.monotonic()
     worker = threading.Thread(target=simulate, daemon=True)

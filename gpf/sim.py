@@ -3,6 +3,9 @@
 build/<config>/rtl/              generated SystemVerilog, file lists, manifest.json
 build/<config>/<sim>/<module>/   simulator build, results.xml, sim.log
 build/<config>/<sim>/<module>-waves/   the same, built with waves: <module>.fst and its .gtkw
+build/<config>/<sim>/<module>-coverage/   Verilator with line and toggle coverage (its coverage.dat)
+build/coverage/func/<test>.yml   each run's functional coverage (tb/coverage.py; gpf coverage)
+build/coverage/code/dat/<test>.dat   each coverage build's run (gpf/code_coverage.py)
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 from collections.abc import Iterator
@@ -143,12 +147,30 @@ def _keep_runtime(cache: Path, build_dir: Path) -> None:
 
 
 def sim_build_dir(config_dir: Path, sim: str, module: str, netlist: str | None = None,
-                  waves: bool = False) -> Path:
+                  waves: bool = False, code_coverage: bool = False) -> Path:
     """build/<config>/<sim>/<module>, or <sim>-<netlist kind>/ for a netlist (gate, gate-mutant);
     <module>-waves/ for a build with waves, so that switching waves on and off rebuilds neither
-    (a model built with tracing is another model)."""
+    (a model built with tracing is another model); <module>-coverage/ for one with Verilator's
+    coverage counters (and -waves-coverage/ with both)."""
     return config_dir / (f"{sim}-{netlist}" if netlist else sim) / \
-        (f"{module}-waves" if waves else module)
+        (module + ("-waves" if waves else "") + ("-coverage" if code_coverage else ""))
+
+
+CODE_COVERAGE_ENV = "GPF_CODE_COVERAGE"   # set (make COVERAGE=1): every Verilator run counts
+COVERAGE_ARGS = ["--coverage-line", "--coverage-toggle"]
+
+
+def code_coverage_wanted(sim: str) -> bool:
+    return sim == "verilator" and os.environ.get(CODE_COVERAGE_ENV, "") not in ("", "0")
+
+
+def coverage_name(cfg: Config, module: str, sim: str, seed: int, testcase: str | None) -> str:
+    """A file name for one run's coverage: the pytest test that ran it (if any), the module,
+    the config, the simulator, the seed and the test cases."""
+    test = os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" ", 1)[0]
+    test = test.split("::", 1)[-1] if test else "gpf"
+    name = f"{test}--{module}-{cfg.name}-{sim}-seed{seed}" + (f"-{testcase}" if testcase else "")
+    return re.sub(r"[^A-Za-z0-9_.,=+-]+", "_", name)[:200]
 
 
 def test_module(module: str) -> str:
@@ -189,6 +211,10 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
 
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "little")
+    # coverage counts the shipped templates only (a mutant's run is not the design's)
+    shipped = template_dir is None or Path(template_dir).resolve() == TEMPLATE_DIR.resolve()
+    code_coverage = code_coverage_wanted(sim) and shipped and not gate and netlist is None
+    cov_name = coverage_name(cfg, module, sim, seed, testcase)
     config_dir = (build_root / cfg.name).resolve()
     # every module, so the manifest is whole whichever module runs (runs share the folder)
     generated = generate(cfg, config_dir / "rtl", template_dir=template_dir or TEMPLATE_DIR,
@@ -201,7 +227,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         sources = [netlist or gate_netlist(cfg, module, build_root)]
     # a mutant's netlist (gate-mutant/) builds beside the real one's (gate/)
     build_dir = sim_build_dir(config_dir, sim, module,
-                              sources[0].parent.parent.name if gate else None, waves=waves)
+                              sources[0].parent.parent.name if gate else None, waves=waves,
+                              code_coverage=code_coverage)
     build_dir.mkdir(parents=True, exist_ok=True)
     top = MODULES[module].top
     # the testbench's harness around the top is the toplevel; not around a netlist (Verilator
@@ -225,6 +252,8 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
             build_args += ["--timing", "-CFLAGS", "-fcoroutines"]
         if waves:
             build_args += ["--trace-fst", "--trace-structs"]
+        if code_coverage:
+            build_args += COVERAGE_ARGS
         if gate:
             # a netlist's bit-blasted vectors look circular to Verilator: a speed warning only
             # (Yosys `check -assert` has already refused real combinational loops). Every flop
@@ -252,6 +281,13 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
         "TEST_LEVEL": os.environ.get("TEST_LEVEL", "default"),
         **(extra_env or {}),
     }
+    if shipped:
+        func_dir = (build_root / "coverage" / "func").resolve()
+        env["GPF_COVERAGE_FILE"] = str(func_dir / f"{cov_name}.yml")
+        Path(env["GPF_COVERAGE_FILE"]).unlink(missing_ok=True)   # a run that samples nothing
+    dat = build_dir / "coverage.dat"
+    if code_coverage:
+        dat.unlink(missing_ok=True)
     # cocotb's runner exits the process on failures when it sees pytest; we report instead
     hidden = os.environ.pop("PYTEST_CURRENT_TEST", None)
     try:
@@ -267,9 +303,13 @@ def run_sim(cfg: Config, module: str, sim: str = "verilator", *, waves: bool = F
     finally:
         if hidden is not None:
             os.environ["PYTEST_CURRENT_TEST"] = hidden
+    if code_coverage and dat.exists():   # kept per run: gpf coverage merges them
+        kept = (build_root / "coverage" / "code" / "dat" / f"{cov_name}.dat").resolve()
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(dat, kept)
     if waves:
         from gpf.rtl.waves import write_view
 
-        write_view(cfg, module, sim, waves_file)
+        write_view(cfg, module, sim, waves_file, netlist=gate)
     tests, failed = get_results(Path(xml))
     return SimResult(module, sim, seed, tests, failed, Path(xml), waves_file if waves else None)

@@ -3,10 +3,11 @@ or a whole filter on an LFE5U-85F, out of context (no pins: a filter's ports out
 package's), and report Fmax and the critical path's ends.
 
 Between the two, the flip-flops either side of each multiplier move into its MULT18X18D
-(gpf.dsp_registers), as a vendor flow would do: synth_ecp5 leaves them in the fabric.
+(gpf.dsp_registers) and those behind each block RAM's read into its output register
+(gpf.bram_registers), as a vendor flow would do: synth_ecp5 leaves them in the fabric.
 
 build/<config>/timing/<module>/   yosys.ys, yosys.log, netlist.json (synth_ecp5's), packed.json
-                                  (the DSPs' registers in), nextpnr.log, report.json
+                                  (the DSPs' and block RAMs' registers in), nextpnr.log, report.json
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from gpf.bram_registers import pack_bram_registers
 from gpf.config import Config, for_family
 from gpf.dsp_registers import pack_dsp_registers
 from gpf.outputs import atomic_write_text
@@ -48,6 +50,7 @@ class Timing:
     late: int                              # of them, arriving after the target period
     late_groups: list[tuple[str, int, float]]   # (register name, how many, worst arrival ns)
     dsp_registers: dict                    # gpf.dsp_registers.Packed, or {} when not packed
+    bram_registers: dict                   # gpf.bram_registers.PackedRams, or {}
     seconds: float
     log: Path
 
@@ -118,13 +121,14 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
               + f"hierarchy -check -top {top}\n"
               + f"synth_ecp5 -top {top} -json {netlist.name}\n", folder)
     report.unlink(missing_ok=True)
-    placed, packed = netlist, {}
+    placed, packed, packed_rams = netlist, {}, {}
     design = json.loads(netlist.read_text())
     too_big = over_capacity(design)
     if too_big:
         raise SynthError(f"{module}, config {cfg.name}: {too_big}")
     if dsp_registers:
         packed = pack_dsp_registers(design).__dict__
+        packed_rams = pack_bram_registers(design).__dict__
         placed = folder / "packed.json"
         atomic_write_text(placed, json.dumps(design))   # a netlist: no floats
     try:
@@ -152,4 +156,4 @@ def place_and_route(cfg: Config, module: str, build_root: Path = Path("build"),
                   sum(step.get("type") == "logic" for step in path),
                   {k: [v["used"], v["available"]] for k, v in data.get("utilization", {}).items()
                    if v.get("used")},
-                  endpoints, late, groups, packed, time.monotonic() - start, log)
+                  endpoints, late, groups, packed, packed_rams, time.monotonic() - start, log)

@@ -672,9 +672,35 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
     }
 
 
+def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
+    """The dot pipeline's issue for each column j and clock c of a Cholesky core (the template
+    reads it as one case table of {j, c}: no adder or compare between the counters and the
+    index registers). Row a = j + 1 + c against column j while c <= n - 1 - j (c = n - 1 - j:
+    row j + 1 against itself, the next pivot's partial sum); each value at the template's widths.
+    Sigma's and L's entry (a, b) sits at a n + b."""
+    n, jw, cw, tw = core["n"], core["jw"], core["cw"], core["tw"]
+    row_w = jw + 1
+
+    def row_base(r: int) -> int:
+        r %= 1 << tw
+        return r * n if r < n else 0
+
+    table = []
+    for j in range(n):
+        left = (n - 1 - j) % (1 << row_w)
+        for c in range(core["c_end"] + 1):
+            part = left % (1 << cw) == c
+            row = (j + 1 + (0 if part else c % (1 << row_w))) % (1 << row_w)
+            col = (j + part) % (1 << row_w)
+            table.append({"key": (j << cw) | c, "ok": int(j < n - 1 and c <= left % (1 << cw)),
+                          "abase": row_base(row), "jbase": row_base(col),
+                          "sidx": (row_base(row) + col % (1 << tw)) % (1 << tw)})
+    return table
+
+
 def propagate_bot_context(cfg: Config) -> dict[str, Any]:
     """p' = p + T v + a e, v' = v + b e per axis (model.blocks.propagate_bot): the constant
-    products (stage 1), one rounded, saturated sum per component (stage 2)."""
+    products (stage 1), one exact sum per component (stage 2), rounded and saturated (stage 3)."""
     dp = datapath(cfg)
     if len(set(dp.x)) != 1:
         raise ValueError(f"propagate_bot: the state components have different formats {dp.x}")
@@ -686,7 +712,7 @@ def propagate_bot_context(cfg: Config) -> dict[str, Any]:
 
     whole = (x.min_raw, x.max_raw, x.frac_bits)
     return {
-        "lanes": cfg.lanes, "latency": 2,
+        "lanes": cfg.lanes, "latency": 3,
         "x_width": x.width, "x_fmt": str(x), "noise_width": noise.width,
         "noise_fmt": str(noise),
         "in_width": 4 * x.width + 2 * noise.width, "out_width": 4 * x.width + 1,
@@ -894,8 +920,11 @@ def _weight_block(cfg: Config, lane: dict[str, Any], lane_latency: int) -> dict[
     """A weight block's context: its lanes' (up to t), stage M and the exp lanes."""
     dp = datapath(cfg)
     lane_w = dp.n * dp.word + dp.weight.width + 1
+    latency = lane_latency + 1 + lane["exp_latency"]
     return {**lane, "lanes": cfg.lanes, "components": dp.n, "lane_latency": lane_latency,
-            "latency": lane_latency + 1 + lane["exp_latency"],
+            "latency": latency,
+            # the particles' FIFO: every beat in flight, and room for one more
+            "xq_log2": math.ceil(math.log2(latency + 1)),
             "out_width": cfg.lanes * lane_w + SHIFT_BITS}
 
 
@@ -1008,6 +1037,7 @@ def cholesky_context(cfg: Config) -> dict[str, Any]:
                       "clocks": clocks, "latency": sum(clocks) + 2,
                       "cw": max(clocks).bit_length(), "jw": max(1, (size - 1).bit_length()),
                       "tw": max(size + 1, size * size - 1).bit_length()})
+        cores[-1]["issue"] = _chol_issue_table(cores[-1])
     kinds = list({c["n"]: c for c in cores}.values())
     latency = max(c["latency"] for c in cores) + 1     # + the input register
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
@@ -1123,9 +1153,11 @@ MODULES: dict[str, Module] = {
                             propagate_bot_context, apps=("bot",)),
     "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
                             propagate_uav_context, apps=("uav",)),
-    "weight_bot": Module("weight_bot", ("weight_bot_lane", "weight_bot"), weight_bot_context,
+    "weight_bot": Module("weight_bot",
+                         ("gpf_fifo", "weight_bot_lane", "weight_bot"), weight_bot_context,
                          uses=("cordic_atan2", "exp"), apps=("bot",)),
-    "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
+    "weight_uav": Module("weight_uav",
+                         ("gpf_fifo", "weight_uav_lane", "weight_uav"), weight_uav_context,
                          uses=("exp",), apps=("uav",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
     "cholesky": Module("cholesky", ("cholesky_core", "cholesky"), cholesky_context, laned=False),

@@ -148,6 +148,39 @@ def write_gtkw(path: Path, dumpfile: Path, groups: list[Group],
     return [Path(path), *filters]
 
 
+def keep_declared(groups: list[Group], declared: dict[str, Declared]
+                  ) -> tuple[list[Group], list[str]]:
+    """``groups`` without the traces naming a signal ``declared`` (a dump's) lacks, and the names
+    left out: a synthesized netlist keeps its ports but may rename or merge internal wires. A
+    combined vector goes whole if one of its bits is missing; a group left empty goes too."""
+    missing: list[str] = []
+
+    def present(path: str) -> bool:
+        match = _RANGE_RE.match(path)
+        base = match["base"] if match else path
+        if base not in declared:
+            missing.append(base)
+            return False
+        return True
+
+    def keep(items: list[Trace | Bits | Group]) -> list[Trace | Bits | Group]:
+        out: list[Trace | Bits | Group] = []
+        for item in items:
+            if isinstance(item, Group):
+                inner = keep(item.traces)
+                if inner:
+                    out.append(Group(item.name, inner, item.closed))
+            elif isinstance(item, Bits):
+                if all([present(path) for path in item.paths]):
+                    out.append(item)
+            elif present(item.path):
+                out.append(item)
+        return out
+
+    kept = keep(list(groups))
+    return kept, sorted(set(missing))
+
+
 def render_filters(groups: list[Group], savefile: Path) -> dict[Path, str]:
     """The translate filter files the traces of ``groups`` use: path -> text."""
     out: dict[Path, str] = {}

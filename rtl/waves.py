@@ -36,7 +36,7 @@ from gpf.rtl.generate import (
     sigma_predict_context,
     sqrt_context,
 )
-from gpf.rtl.gtkw import Bits, Dump, Group, Names, Trace, Window, write_gtkw
+from gpf.rtl.gtkw import Bits, Dump, Group, Names, Trace, Window, keep_declared, write_gtkw
 from gpf.tb.harness import CLOCK_NS
 from gpf.toolchain import ToolchainError
 
@@ -853,9 +853,20 @@ def _without_harness(fst: Path, module: str) -> bool:
         return False
 
 
-def write_view(cfg: Config, module: str, sim: str, fst: Path) -> Path:
-    """Write <fst>.gtkw (and its filter files) for the dump `fst`; return the .gtkw's path."""
+def write_view(cfg: Config, module: str, sim: str, fst: Path, netlist: bool = False) -> Path:
+    """Write <fst>.gtkw (and its filter files) for the dump `fst`; return the .gtkw's path.
+
+    A `netlist`'s dump keeps the ports but not every internal wire (synthesis merges and renames
+    them): its view leaves out, and names, the signals the dump lacks."""
     gtkw = fst.with_suffix(".gtkw")
+    groups = VIEWS[module](cfg, sim)
+    if MODULES[module].harness and _without_harness(fst, module):
+        groups = filter_view(cfg, sim)   # a netlist runs without the harness: the core is the top
+    if netlist and fst.exists():
+        groups, missing = keep_declared(groups, Dump(fst).declared())
+        if missing:
+            print(f"waves: {len(missing)} signals the netlist does not keep are left out of "
+                  f"{gtkw.name}: {', '.join(missing)}")
     try:
         window = view_window(cfg, module, sim, Dump(fst)) if fst.exists() else None
     except (ValueError, KeyError):
@@ -863,10 +874,7 @@ def write_view(cfg: Config, module: str, sim: str, fst: Path) -> Path:
     if window is None:  # the first 24 clocks (a whole filter: 400, its first step)
         clocks = 400 if MODULES[module].is_filter else 24
         window = Window(0, clocks * CLOCK_NS * 1000)
-    view = VIEWS[module](cfg, sim)
-    if MODULES[module].harness and _without_harness(fst, module):
-        view = filter_view(cfg, sim)   # a netlist runs without the harness: the core is the top
-    write_gtkw(gtkw, fst, view, window)
+    write_gtkw(gtkw, fst, groups, window)
     return gtkw
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import random
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NoReturn
@@ -301,6 +302,11 @@ class Source(_Port):
         self.idle, self.rng, self.op = idle, rng, op
         self.beats: list[Beat] = []   # what crossed the bus
         self.done = Event()           # set once every beat was taken
+        # for functional coverage (tb/coverage.py): idle clocks the testbench put before each
+        # beat, and clocks each beat waited for the block's tready
+        self.gaps: Counter[int] = Counter()
+        self.waits: Counter[int] = Counter()
+        self._offered_at: int | None = None
         self._todo = iter(beats)
         self._gap = 0                 # idle clocks before the next beat is presented
         self._state = "next"          # next (draw a gap) | gap | presenting | done
@@ -313,6 +319,7 @@ class Source(_Port):
             self._gap = 0
             while self.rng.random() < self.idle:
                 self._gap += 1
+            self.gaps[self._gap] += 1
             self._state = "gap"
         if self._state != "gap":
             return
@@ -341,10 +348,14 @@ class Source(_Port):
         """At ReadOnly: record a beat; say whether the port needs the next clock (AWAKE), a
         change of its `watch` signal (WATCH) or nothing more (IDLE)."""
         ready = self.tready.value
+        if self._state == "presenting" and self._offered_at is None:
+            self._offered_at = cycle()
         if ready is _1 or (ready is not _0 and ready == 1):
             if self._state == "presenting" and self.tvalid.value == 1:
                 self.beats.append(Beat(self.tdata.value.to_unsigned(), cycle(),
                                        self.tlast is not None and self.tlast.value == 1))
+                self.waits[self.beats[-1].cycle - self._offered_at] += 1
+                self._offered_at = None
                 self._state = "next"
         else:
             if ready is not _0:
@@ -365,6 +376,9 @@ class Sink(_Port):
         super().__init__(prefix, name, has_last)
         self.stall, self.rng = stall, rng
         self.beats: list[Beat] = []
+        # for functional coverage (tb/coverage.py): clocks each beat was offered and not taken
+        self.waits: Counter[int] = Counter()
+        self._stalled = 0
         self._ready = 0 if stall >= 1 else 1
         self.tready.value = self._ready
         self._want, self._got = 0, Event()
@@ -381,7 +395,11 @@ class Sink(_Port):
             ready = self.tready.value
             # X or Z in tdata or tlast is a violation, not a 0
             beat = self._offered(ready is _1 or (ready is not _0 and ready == 1), cycle)
-            if beat is not None:
+            if beat is None:
+                self._stalled += 1
+            else:
+                self.waits[self._stalled] += 1
+                self._stalled = 0
                 self.beats.append(Beat(beat[0], cycle(), beat[1]))
                 if len(self.beats) >= self._want:
                     self._got.set()

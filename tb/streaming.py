@@ -15,6 +15,7 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, Combine, First, Timer
 
+from gpf.tb import coverage
 from gpf.tb.harness import CLOCK_NS, Bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack, unpack
 from gpf.tb.stream import Sink, Source, StreamLoop
@@ -104,8 +105,11 @@ async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
     expected = block.model(with_operands(block, seen, lasts_in, ops))
     sb = Scoreboard(block.name, block.fields_out + block.beat_out,
                     expect_mismatch=expect_mismatch)
-    sb.compare(expected, unpack([beat.data for beat in mon_out.beats], block.fields_out,
-                                1 if block.reduces else block.lanes, block.beat_out))
+    got = unpack([beat.data for beat in mon_out.beats], block.fields_out,
+                 1 if block.reduces else block.lanes, block.beat_out)
+    sb.compare(expected, got)
+    if not expect_mismatch:
+        coverage.sample_block(block, b.cfg.app, b.cfg.lanes, got, lasts_in, mon_in, mon_out)
     lasts_out = [beat.last for beat in mon_out.beats]
     if block.reduces:
         assert all(lasts_out), f"{block.name}: a step's result beat without tlast"

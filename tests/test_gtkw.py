@@ -17,6 +17,7 @@ from gpf.rtl.gtkw import (
     Names,
     Trace,
     Window,
+    keep_declared,
     render_filters,
     render_gtkw,
     write_gtkw,
@@ -499,6 +500,24 @@ def test_signal_missing_from_dump_rejected(tmp_path):
         render_gtkw(dump, [Group("g", [Trace("tb.m_axis_tdata", 63, 0)])])  # no TOP. prefix
     with pytest.raises(ValueError, match="1-bit"):
         render_gtkw(dump, [Group("g", [Trace("TOP.tb.clk", 1, 0)])])
+
+
+def test_netlist_view_keeps_what_the_dump_declares(dump):
+    # a netlist's dump lacks wires synthesis merged: those traces (a combined vector whole, a
+    # group left empty) go, named; what stays renders without error
+    groups = [Group("g", [Trace("TOP.tb.clk", 0, 0), Trace("TOP.tb.gone", 3, 0),
+                          Trace("TOP.tb.cnt[7:0]", 3, 0),
+                          Bits("hs", ("TOP.tb.valid", "TOP.tb.merged")),
+                          Group("inner", [Trace("TOP.tb.also_gone", 0, 0)])]),
+              Group("kept", [Bits("hs", ("TOP.tb.valid", "TOP.tb.ready"))])]
+    with pytest.raises(ValueError, match="no such signal"):
+        render_gtkw(dump, groups)
+    kept, missing = keep_declared(groups, Dump(dump).declared())
+    assert missing == ["TOP.tb.also_gone", "TOP.tb.gone", "TOP.tb.merged"]
+    assert kept == [Group("g", [Trace("TOP.tb.clk", 0, 0), Trace("TOP.tb.cnt[7:0]", 3, 0)]),
+                    groups[1]]
+    lines = body(render_gtkw(dump, kept))
+    assert "TOP.tb.clk" in lines and not any("gone" in line for line in lines)
 
 
 def test_zoom_is_finite_for_an_empty_window():

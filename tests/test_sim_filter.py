@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 from test_sim_blocks import MUTANTS, SIM_MARKS, mutated_templates, run_mutant, waves_possible
 
 from gpf.cli import main as gpf_main
@@ -96,6 +97,12 @@ def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: 
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7,
                              testcase=",".join(tests), verilator_opt=SHORT_OPT)
     check_run(result, res, steps, particles, lanes, tests=len(tests))
+    # the run's functional coverage (tb/gpf/coverage.py), for gpf coverage to merge
+    db = next(Path("build/coverage/func").glob(
+        f"test_filter_short*--gpf_*-{config}-lanes{lanes}-{sim}-seed7-*.yml"))
+    app = load_config(f"configs/{config}.toml").app
+    point = yaml.safe_load(db.read_text())[f"gpf.{app}.lanes"]
+    assert point["bins:_hits"][f"lanes {lanes}"] > 0, point
 
 
 # gpf_<app>_axi: the same whole-filter tests through the AXI4-Lite registers and the byte-wide

@@ -87,7 +87,8 @@ def test_run_sim_builds_and_dumps_where_waves_looks(monkeypatch, tmp_path, sim, 
     monkeypatch.setattr(gpf.sim, "_runtime_cache", lambda args: tmp_path / "runtime")
     monkeypatch.setattr(gpf.sim, "_keep_runtime", lambda *a: None)
     views: list[Path] = []
-    monkeypatch.setattr(waves, "write_view", lambda cfg, module, sim, fst: views.append(fst))
+    monkeypatch.setattr(waves, "write_view",
+                        lambda cfg, module, sim, fst, netlist=False: views.append(fst))
     result = run_sim(BOT, "moments", sim, waves=with_waves, seed=1, build_root=tmp_path)
     expected = sim_build_dir((tmp_path / "bot").resolve(), sim, "moments", waves=with_waves)
     assert built == [expected]

@@ -14,7 +14,8 @@ Both give a step's beats as StepBeats, what the scoreboard compares.
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,16 @@ class Layout:
         if hex_digits:
             return unpack_hex(words, fields, self.lanes, per_beat)
         return unpack(list(words), fields, self.lanes, per_beat)
+
+
+@dataclass
+class Stalls:
+    """A stream's stall record for functional coverage (tb/coverage.py's source_bins and
+    sink_bins), as Source and Sink keep it: idle clocks before each beat, clocks each beat
+    waited."""
+
+    gaps: Counter[int] = field(default_factory=Counter)
+    waits: Counter[int] = field(default_factory=Counter)
 
 
 def stall_level(stall: float) -> int:
@@ -161,9 +172,25 @@ class HarnessFeed:
         assert int(d.est_count.value) == steps, "extra result beats"
         assert int(d.cond_count.value) == int(d.part_count.value) == steps * beats, \
             "extra tap beats"
+        self.stalls = self._stalls()
         d.fast.value = 0
         for f in self.files.values():
             f.close()
+
+    def _stalls(self) -> tuple[Stalls, dict[str, Stalls]]:
+        """The harness's stall records: s_step's and each output's (their bins' counts, each
+        under the smallest length of its bin)."""
+        def counts(port: str) -> list[int]:
+            v = int(getattr(self.dut, port).value)
+            return [(v >> (32 * i)) & 0xFFFFFFFF for i in range(4)]
+
+        g = counts("step_gaps")
+        step = Stalls(Counter({0: g[0], 1: g[1], 2: g[2]}), Counter({1: g[3]}))
+        sinks = {}
+        for tap in RECORDS:
+            w = counts(f"{tap}_waits")
+            sinks[tap] = Stalls(waits=Counter({0: w[0], 1: w[1], 2: w[2], 4: w[3]}))
+        return step, sinks
 
 
 class StreamFeed:
@@ -212,6 +239,7 @@ class StreamFeed:
         for _ in range(50):   # nothing more may come out
             await RisingEdge(self.clk)
         self.loop.stop()
+        self.stalls = (self.steps_in, self.sinks)
         mons = self.beats
         assert len(mons["est"]) == steps, "extra result beats"
         assert len(mons["cond"]) == len(mons["part"]) == steps * beats, "extra tap beats"

@@ -36,6 +36,8 @@ from gpf.outputs import write_json
 from gpf.rtl.filter import CYCLES_W, HARNESS_STEPS_MAX, STEP_FIELDS
 from gpf.study.metrics import run_metrics
 from gpf.study.montecarlo import DEFAULT_SCENARIO, SCENARIOS, flag_names
+from gpf.tb import coverage
+from gpf.tb.gpf import coverage as filter_coverage
 from gpf.tb.gpf.feeds import HarnessFeed, Layout, StepBeats, StreamFeed
 from gpf.tb.gpf.ip import Ip
 from gpf.tb.gpf.model_ahead import Checker, Expected, ModelAhead
@@ -287,6 +289,7 @@ class FilterBench:
         await cond.wait(gpf.particles // gpf.cfg.lanes // 2)
         await RisingEdge(self.clk)   # the wait ends in ReadOnly, where nothing may be written
         loop.stop()
+        filter_coverage.sample_reset(self, len(cond.beats))
 
     def init_values(self, mu: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
         """The init beat: N, the raw mu0 and the raw Sigma0 (real sigma0)."""
@@ -332,6 +335,9 @@ class FilterBench:
         await feed.finish(steps, gpf.particles // lanes)
         if self.ip:
             self.check_framing(feed.beats)
+        filter_coverage.sample_run(self, self.scored,
+                                   [bt.last for bt in feed.beats["est"]] if self.ip else None,
+                                   *feed.stalls)
         res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
         res_out.mismatches = self.mismatches
         res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
@@ -353,6 +359,7 @@ class FilterBench:
         # half the time: ten times as long is a hang (a lost beat), not a slow step
         limit = 10 * (beats + 300) * (1 + int(10 * self.spec.stall))
         self.sticky, self.est_cycles = 0, []
+        self.scored: list[StepBeats] = []   # every step's beats, for functional coverage
         self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
         self.reported = time.monotonic()
         checker = Checker(lambda k: self.check_step(k, feed.read(k, beats), model.get(), beats,
@@ -377,6 +384,8 @@ class FilterBench:
         gpf, res = self.gpf, exp.res
         self.sticky |= res.flags
         self.score_step(k, exp, got, beats, self.sticky)
+        if coverage.enabled():
+            self.scored.append(got)
         res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
         est = got.est
         self.est_cycles.append(got.est_cycle)

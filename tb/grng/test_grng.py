@@ -13,6 +13,7 @@ from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge
 
 from gpf.model.fixed import shift_round
 from gpf.model.grng import COMPONENTS, GrngModel
+from gpf.tb import coverage
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, unpack
 from gpf.tb.stream import ReadyDriver, StreamMonitor
@@ -52,6 +53,8 @@ async def collect(mon: StreamMonitor, n: int, max_clocks: int | None = None) -> 
 def check(sb: Scoreboard, b: Bench, expected_raw: np.ndarray, words: list[int]) -> None:
     actual = unpack(words, sb.fields, b.cfg.lanes)
     sb.compare({"z": expected_raw[: len(words)]}, actual)
+    if not sb.expect_mismatch:
+        coverage.sample_grng(b.cfg.app, b.cfg.lanes, b.cfg.noise.to_real(actual["z"]))
 
 
 async def idle_inputs(dut: SimHandleBase) -> None:

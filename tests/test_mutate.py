@@ -1,0 +1,112 @@
+"""The mutation engine (gpf.rtl.mutate) and `gpf mutants`: mutants of literal SV only, stable ids,
+a known mutant killed and a listed equivalent marked as such."""
+
+from __future__ import annotations
+
+import random
+import re
+from pathlib import Path
+
+import jinja2
+import pytest
+
+from gpf.mutants import EQUIVALENT_FILE, campaign, equivalents
+from gpf.rtl.generate import TEMPLATE_DIR
+from gpf.rtl.mutate import mask, scan, scan_dir
+from gpf.toolchain import icarus_missing
+
+SMALL = """{% set w = 4 %}
+// a + b, in a comment
+module m (
+  input  logic [{{ w - 1 }}:0] a,
+  input  logic clk, rst,
+  output logic y_q
+);
+  assign y = a[0] & {{ "a[1] | a[2]" }};
+`ifndef SYNTHESIS
+  always @(posedge clk) if (a == 0) $fatal(1, "a + b");
+`endif
+  always_ff @(posedge clk) begin
+    if (rst) y_q <= '0;
+    else y_q <= a[1] + 1'b1;
+  end
+endmodule
+"""
+
+
+def test_small_template_mutants_are_exactly_the_literal_sites() -> None:
+    found = {(mu.id, mu.before, mu.after) for mu in scan("t.sv.j2", SMALL)}
+    assert found == {
+        ("t.sv.j2:8:15:slice", "[0]", "[1]"),
+        ("t.sv.j2:8:19:logic", "&", "|"),
+        ("t.sv.j2:13:9:negate", "rst", "!(rst)"),     # its '0 is a reset value: not mutated
+        ("t.sv.j2:14:17:reg-hold", "a[1] + 1'b1", "y_q"),
+        ("t.sv.j2:14:18:slice", "[1]", "[2]"),
+        ("t.sv.j2:14:18:slice:1", "[1]", "[0]"),
+        ("t.sv.j2:14:22:arith", "+", "-"),
+        ("t.sv.j2:14:27:const", "1", "0"),
+    }
+
+
+def _jinja_spans(text: str) -> list[tuple[int, int, str]]:
+    return [(m.start(), m.end(), m.group()[:2])
+            for m in re.finditer(r"\{\{.*?\}\}|\{%.*?%\}|\{#.*?#\}", text, re.S)]
+
+
+def test_every_mutant_is_outside_jinja_and_comments_and_still_parses() -> None:
+    env = jinja2.Environment(trim_blocks=True, lstrip_blocks=True)
+    mutants = scan_dir(TEMPLATE_DIR)
+    assert len(mutants) > 1000
+    texts = {p.name: p.read_text() for p in TEMPLATE_DIR.glob("*.sv.j2")}
+    spans = {name: _jinja_spans(text) for name, text in texts.items()}
+    masks = {name: mask(text) for name, text in texts.items()}
+    for mu in mutants:
+        a, b = mu.offset, mu.offset + len(mu.before)
+        start = masks[mu.template][a]
+        assert start != " " and (start != "J" or mu.cls in ("reg-hold", "negate")), \
+            f"{mu.id} starts in Jinja or a comment"
+        for s, e, kind in spans[mu.template]:
+            inside = s < b and a < e
+            # a held register or a negated condition may contain a whole {{ expression }}
+            whole = a <= s and e <= b and kind == "{{" and mu.cls in ("reg-hold", "negate")
+            assert not inside or whole, f"{mu.id} edits Jinja: {mu.before!r}"
+    for mu in random.Random(1).sample(mutants, 150):
+        env.parse(mu.apply(texts[mu.template]))   # a mutant never breaks the template's syntax
+
+
+def test_ids_are_stable() -> None:
+    first = [mu.id for mu in scan_dir(TEMPLATE_DIR)]
+    assert first == [mu.id for mu in scan_dir(TEMPLATE_DIR)]
+    assert len(set(first)) == len(first)
+    # a line added below a site leaves its id alone; one added above moves it a line down
+    before = {mu.id for mu in scan("t.sv.j2", SMALL)}
+    below = {mu.id for mu in scan("t.sv.j2", SMALL.replace("endmodule", "\nendmodule"))}
+    assert before == below
+    above = {mu.id for mu in scan("t.sv.j2", "\n" + SMALL)}
+    assert {i.replace(":8:", ":9:", 1) for i in before if ":8:" in i} <= above
+
+
+def test_equivalent_entries_name_existing_mutants() -> None:
+    """Every reviewed entry still names a mutant of the templates, with its text."""
+    mutants = {mu.id: mu for mu in scan_dir(TEMPLATE_DIR)}
+    for key, entry in equivalents(EQUIVALENT_FILE).items():
+        assert key in mutants, f"{key}: no such mutant (its line moved? re-review it)"
+        assert (entry["before"], entry["after"]) == (mutants[key].before, mutants[key].after)
+        assert len(entry["reason"]) > 20
+
+
+@pytest.mark.sim
+@pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
+def test_a_known_mutant_is_killed_and_a_listed_equivalent_is_marked(tmp_path: Path) -> None:
+    killed = "sqrt_lane.sv.j2:42:31:compare"      # a root digit's >= made >
+    equivalent = "sqrt.sv.j2:40:32:arith"        # in equivalent.toml
+    report = campaign(ids=[killed, equivalent], out=tmp_path, log=lambda *_: None)
+    import json
+
+    data = json.loads(report.with_suffix(".json").read_text())
+    verdicts = {v["id"]: v for v in data["verdicts"]}
+    assert verdicts[killed]["status"] == "killed"
+    assert verdicts[equivalent]["status"] == "survived"
+    assert verdicts[equivalent]["equivalent"] == equivalents()[equivalent]["reason"]
+    assert data["scores"]["all"]["score_pct"] == 100.0
+    assert "Equivalent survivors (1)" in report.read_text()
