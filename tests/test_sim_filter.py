@@ -94,15 +94,27 @@ def shared_build(config: str, sim: str, lanes: int) -> list:
     for run in RUNS])
 def test_filter_short(config: str, sim: str, lanes: int, steps: int, particles: int) -> None:
     tests = [t for t in FILTER_TESTS if (config, sim, t) not in SHORT_SKIPS]
+    began = time.time()
     result, res = filter_run(config, sim, lanes, steps, particles, seed=7,
                              testcase=",".join(tests), verilator_opt=SHORT_OPT)
     check_run(result, res, steps, particles, lanes, tests=len(tests))
-    # the run's functional coverage (tb/gpf/coverage.py), for gpf coverage to merge
-    db = next(Path("build/coverage/func").glob(
-        f"test_filter_short*--gpf_*-{config}-lanes{lanes}-{sim}-seed7-*.yml"))
+    # the run's functional coverage (tb/gpf/coverage.py), for gpf coverage to merge: this
+    # run's database (a name under another pytest -n grouping may be left from an older run)
+    [db] = [p for p in Path("build/coverage/func").glob(
+        f"test_filter_short*--gpf_*-{config}-lanes{lanes}-{sim}-seed7-*.yml")
+        if p.stat().st_mtime >= began]
     app = load_config(f"configs/{config}.toml").app
-    point = yaml.safe_load(db.read_text())[f"gpf.{app}.lanes"]
-    assert point["bins:_hits"][f"lanes {lanes}"] > 0, point
+    points = yaml.safe_load(db.read_text())
+
+    def hits(point: str) -> dict[str, int]:
+        return points[f"gpf.{app}.{point}"]["bins:_hits"]
+
+    assert hits("lanes")[f"lanes {lanes}"] > 0, hits("lanes")
+    # test_stalls' stall records (the harness's counts) and each tap's tlast reach their bins
+    for port in ("m_cond", "m_part"):
+        assert hits(f"stall.{port}")["wait 1"] > 0, hits(f"stall.{port}")
+    assert hits("stall.s_step")["backpressure"] > 0, hits("stall.s_step")
+    assert hits("tlast")["cond: last of many"] and hits("tlast")["part: last of many"]
 
 
 # gpf_<app>_axi: the same whole-filter tests through the AXI4-Lite registers and the byte-wide
