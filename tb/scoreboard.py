@@ -7,6 +7,7 @@ numbers and as raw hex; totals of matched and mismatched values are kept for the
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,15 +35,20 @@ def unpack(words: list[int], fields: list[Field], lanes: int,
     nbytes = max(1, (total + 7) // 8)
     raw = np.frombuffer(b"".join(w.to_bytes(nbytes, "little") for w in words),
                         dtype=np.uint8).reshape(len(words), nbytes)
-    return unpack_bits(np.unpackbits(raw, axis=1, bitorder="little"), fields, lanes,
-                       beat_fields)
+    bits = np.unpackbits(raw, axis=1, bitorder="little").astype(np.int64)
+
+    def read(offset: int, width: int) -> np.ndarray:
+        return bits[:, offset:offset + width] @ np.left_shift(np.int64(1), np.arange(width))
+
+    return _fields(len(words), fields, lanes, beat_fields, read)
 
 
-def unpack_bits(bits: np.ndarray, fields: list[Field], lanes: int,
-                beat_fields: list[Field] | tuple[Field, ...] = ()) -> dict[str, np.ndarray]:
-    """unpack() from the words as a bit matrix, (beats, bits) LSB first."""
-    out = {f.name: np.zeros((len(bits), lanes), dtype=np.int64) for f in fields}
-    out.update({f.name: np.zeros((len(bits), 1), dtype=np.int64) for f in beat_fields})
+def _fields(rows: int, fields: list[Field], lanes: int,
+            beat_fields: list[Field] | tuple[Field, ...],
+            read: Callable[[int, int], np.ndarray]) -> dict[str, np.ndarray]:
+    """unpack()'s fields, each from read(offset, width): its raw bits as unsigned int64."""
+    out = {f.name: np.zeros((rows, lanes), dtype=np.int64) for f in fields}
+    out.update({f.name: np.zeros((rows, 1), dtype=np.int64) for f in beat_fields})
     lane_w = sum(f.fmt.width for f in fields)
     groups = [(lane, lane * lane_w, fields) for lane in range(lanes)]
     groups.append((0, lanes * lane_w, list(beat_fields)))
@@ -50,8 +56,7 @@ def unpack_bits(bits: np.ndarray, fields: list[Field], lanes: int,
         for f in group:
             width = f.fmt.width
             assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
-            weights = np.left_shift(np.int64(1), np.arange(width, dtype=np.int64))
-            value = bits[:, offset:offset + width].astype(np.int64) @ weights
+            value = read(offset, width)
             if f.fmt.signed:
                 value = np.where(value >> (width - 1) != 0, value - (1 << width), value)
             out[f.name][:, lane] = value
@@ -89,24 +94,15 @@ def unpack_hex(digits: np.ndarray, fields: list[Field], lanes: int,
     """unpack() from the words as ASCII hex (rows, digits), most significant digit first: each
     field read as the 64-bit little-endian word at its first byte, shifted and masked."""
     raw = hex_bytes(digits)
-    out = {f.name: np.zeros((len(raw), lanes), dtype=np.int64) for f in fields}
-    out.update({f.name: np.zeros((len(raw), 1), dtype=np.int64) for f in beat_fields})
-    lane_w = sum(f.fmt.width for f in fields)
-    groups = [(lane, lane * lane_w, fields) for lane in range(lanes)]
-    groups.append((0, lanes * lane_w, list(beat_fields)))
-    for lane, offset, group in groups:
-        for f in group:
-            width, first, shift = f.fmt.width, offset // 8, offset % 8
-            assert width <= 62, f"{f.name}: {width}-bit fields are not unpacked"
-            word = _word(raw, first) >> np.uint64(shift)
-            if width + shift > 64:   # its last bits in the byte after those 8
-                word |= _word(raw, first + 8) << np.uint64(64 - shift)
-            value = (word & np.uint64((1 << width) - 1)).astype(np.int64)
-            if f.fmt.signed:
-                value = np.where(value >> (width - 1) != 0, value - (1 << width), value)
-            out[f.name][:, lane] = value
-            offset += width
-    return out
+
+    def read(offset: int, width: int) -> np.ndarray:
+        first, shift = offset // 8, offset % 8
+        word = _word(raw, first) >> np.uint64(shift)
+        if width + shift > 64:   # its last bits in the byte after those 8
+            word |= _word(raw, first + 8) << np.uint64(64 - shift)
+        return (word & np.uint64((1 << width) - 1)).astype(np.int64)
+
+    return _fields(len(raw), fields, lanes, beat_fields, read)
 
 
 def pack(fields: list[Field], values: dict[str, np.ndarray],
