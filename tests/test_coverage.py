@@ -170,7 +170,7 @@ FILTER_TESTS = ("test_filter", "test_stalls", "test_reset_mid_step",
 # out-of-range test N = LANES and N = the maximum at LANES 2 and 4 too; 8 result beats for
 # m_est's stalls (test_stalls stalls it half the clocks)
 COVERAGE_RUNS = [("bot", 1, 33, 8), ("bot", 2, 34, 8), ("bot", 4, 68, 8),
-                 ("uav", 1, 33, 8), ("uav", 2, 34, 8)]
+                 ("uav", 1, 33, 8), ("uav", 2, 34, 8), ("uav", 4, 68, 8)]
 # whole-filter scenarios for the flags, the weights' collapse and the saturations
 COVERAGE_FAULTS = [("bot", "bot_outlier"), ("bot", "bot_bearing_glitch"),
                    ("bot", "bot_far_target"), ("uav_seed002", "uav_gps_glitch")]
@@ -244,22 +244,73 @@ def test_coverage_edge_targets(tmp_path: Path, target: str) -> None:
     check_run(result, res, steps, 64, 1, tests=1)
 
 
+# uav's velocities at the edges of their format (a CSV scenario each, built on uav_flight's
+# noise-free shape): the attitude level and still (q = 1, no rotation), the accelerometer pushing
+# the velocity out along (1, -1, 1) times `sign` with the GPS fix on the edge, then pulling it
+# back in (a saturation that clears); or the particles on one edge and the GPS fix on the other
+# (the weight's velocity difference saturates). name: (sign of the particles, of the GPS fix).
+UAV_EDGES = {"uav-velocity-high": (1, 1), "uav-velocity-low": (-1, -1),
+             "uav-gps-opposite": (-1, 1)}
+
+
+def uav_edge_scenario(name: str, steps: int):
+    from gpf.model.flight import G
+    from gpf.model.scenarios import uav_flight
+
+    cfg = load_config("configs/uav.toml")
+    edge = float(cfg.formats["velocity"].max_real)
+    part, gps = UAV_EDGES[name]
+    d = np.array([1.0, -1.0, 1.0])
+    sc = uav_flight(cfg, steps, 5)
+    sc.mu0 = np.concatenate([[1.0, 0.0, 0.0, 0.0], part * d * (edge - 0.2)])
+    lift = np.array([0.0, 0.0, G])           # what holds a level, still airframe up
+    out = (np.arange(1, steps + 1) <= steps // 2) | (part != gps)
+    sc.inputs["omega"][1:] = 0.0
+    sc.inputs["accel"][1:] = np.where(out[:, None], part * 40.0, part * -60.0) * d + lift
+    back = np.maximum(0, np.arange(1, steps + 1) - steps // 2) * 0.6 * (part == gps)
+    sc.measurements["v_gps"][1:] = gps * d * (edge - back[:, None])
+    sc.truth[:, :4] = [1.0, 0.0, 0.0, 0.0]
+    sc.truth[1:, 4:] = sc.measurements["v_gps"][1:]
+    sc.truth[0, 4:] = sc.mu0[4:]
+    sc.meta.update(generator=f"edge-{name}")
+    return sc
+
+
+@pytest.mark.parametrize("name", [pytest.param(t, marks=_marks("uav", 2)) for t in UAV_EDGES])
+def test_coverage_uav_edges(tmp_path: Path, name: str) -> None:
+    from test_sim_filter import SHORT_OPT, check_run, filter_run
+
+    from gpf.model.scenarios import write_csv
+
+    steps = 6
+    path = tmp_path / f"edge-{name}.csv"
+    write_csv(uav_edge_scenario(name, steps), path)
+    result, res = filter_run("uav", "verilator", 2, steps, 64, seed=1, scenario=str(path),
+                             testcase="test_filter", verilator_opt=SHORT_OPT)
+    check_run(result, res, steps, 64, 2, tests=1)
+
+
 def laned_blocks() -> list:
+    """(module, app, lanes): every laned block at LANES 4 in each application's config, and at
+    LANES 1 in the second application's (the block matrix runs the first's at LANES 1 and 2,
+    the second's at LANES 2)."""
     from gpf.rtl.generate import MODULES
 
-    return [pytest.param(name, marks=[pytest.mark.regress, pytest.mark.coverage,
-                                      pytest.mark.sim, pytest.mark.slow])
-            for name, m in MODULES.items() if m.laned and not m.is_filter and m.simulated]
+    runs = [(name, app, lanes) for name, m in MODULES.items()
+            if m.laned and not m.is_filter and m.simulated
+            for k, app in enumerate(m.apps) for lanes in ((4,) if k == 0 else (1, 4))]
+    return [pytest.param(*run, marks=[pytest.mark.regress, pytest.mark.coverage,
+                                      pytest.mark.sim, pytest.mark.slow],
+                         id=f"{run[0]}-{run[1]}-lanes{run[2]}") for run in runs]
 
 
-@pytest.mark.parametrize("module", laned_blocks())
-def test_coverage_block_lanes4(module: str) -> None:
-    """Every laned block at LANES 4 (the block matrix runs LANES 1 and 2), a fifth of the
-    beats, its application's default config."""
-    from gpf.rtl.generate import MODULES
+@pytest.mark.parametrize("module,app,lanes", laned_blocks())
+def test_coverage_block_lanes(module: str, app: str, lanes: int) -> None:
+    """A laned block at a LANES the block matrix does not run for its application's default
+    config (laned_blocks), a fifth of the beats."""
     from gpf.sim import run_sim
 
-    cfg = load_config(f"configs/{MODULES[module].apps[0]}.toml", {"filter.lanes": 4})
+    cfg = load_config(f"configs/{app}.toml", {"filter.lanes": lanes})
     result = run_sim(cfg, module, "verilator", seed=1004,
                      log_file=Path("build") / cfg.name / f"{module}-verilator.log",
                      verilator_opt="-O0", extra_env={"TEST_LEVEL": "short"})

@@ -230,6 +230,14 @@ def corner_steps(b: Bench) -> Steps:
     late = np.full((full, lanes), 126.0)                        # full sums, then cleared
     late[-1] = 0.0
     s.add(np.broadcast_to(xmax, (full, lanes, n)), late, xmin)
+    for edge in (xmax, xmin):                                  # the mean at its format's edges
+        s.add(np.broadcast_to(edge, (8, lanes, n)), np.zeros((8, lanes)), edge)
+    # the covariance at its edges: particles split between two opposite corners, equal weights,
+    # ref between them (every component together; odd against even components)
+    apart = (np.arange(16) % 2 == 0)[:, None, None]
+    for a, b in ((xmax, xmin), (mixed, np.where(np.arange(n) % 2 == 0, xmax, xmin))):
+        s.add(np.where(apart, a, b) + np.zeros((16, lanes, n)), np.zeros((16, lanes)),
+              np.zeros(n))
     if dp.app == "uav":                                        # tiny and zero quaternions
         for q in ([0, 0, 0, 0], [1, 0, 0, 0], [1, 1, 1, 0], [-1, 1, -1, 1], [0, 0, 0, -3]):
             ref = realistic_ref(dp, rng)
