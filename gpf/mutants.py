@@ -40,10 +40,13 @@ EQUIVALENT_FILE = Path(__file__).resolve().parent.parent / "tests/data/mutants/e
 APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
 # the whole filter's runs for a top's mutant, each only if it survived the one before: a short
 # run (as tests/test_sim_filter.py's mutants), then runs that raise the flags the first never
-# does: every step below the ESS threshold, an outlier measurement, a target out of range
+# does (every step below the ESS threshold, an outlier measurement, a target out of range),
+# two lanes (a lane's indexing is the same at LANES 1) and every stream stalled half the
+# clocks (the handshakes): (scenario, config overrides, stall)
 FILTER_RUN = {"steps": 5, "particles": 32}
-FILTER_ESCALATION = ((None, {}), (None, {"filter.ess_min": 1}), ("bot_outlier", {}),
-                     ("bot_far_target", {}))
+FILTER_ESCALATION = ((None, {}, 0.0), (None, {"filter.ess_min": 1}, 0.0),
+                     ("bot_outlier", {}, 0.0), ("bot_far_target", {}, 0.0),
+                     (None, {"filter.lanes": 2}, 0.0), (None, {}, 0.5))
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
 
@@ -168,15 +171,16 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
     os.environ["TEST_LEVEL"] = level
     try:
         if t.is_filter:
-            runs = [(sc, o) for sc, o in FILTER_ESCALATION if sc is None or sc.startswith(cfg.app)]
-            for scenario, overrides in runs:
+            runs = [r for r in FILTER_ESCALATION if r[0] is None or r[0].startswith(cfg.app)]
+            for scenario, overrides, stall in runs:
                 run_cfg = load_config(config_path(t.config), {"filter.lanes": t.lanes,
                                                               **overrides})
                 res = run_filter(run_cfg, RunArgs(FILTER_RUN["steps"], FILTER_RUN["particles"],
-                                                  1, scenario, SIM, False),
+                                                  1, scenario, SIM, False, stall=stall),
                                  progress=False, build_root=build_root, template_dir=template_dir)
                 if not res["passed"]:
-                    return "killed", (f"scenario {scenario or 'default'} {overrides or ''}: "
+                    return "killed", (f"scenario {scenario or 'default'} {overrides or ''}"
+                                      f"{f' stall {stall}' if stall else ''}: "
                                       f"{res['mismatches']} mismatches, first: "
                                       f"{res.get('first_mismatch')}")
             return "survived", f"the whole filter passed {len(runs)} runs"

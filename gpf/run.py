@@ -30,6 +30,7 @@ class RunArgs:
     gate: bool = False      # the synthesized netlist instead of the RTL
     ip: bool = False        # through gpf_<app>_axi: AXI4-Lite registers, byte-wide streams
     bare: bool = False      # the harness alone, nothing checked: the simulator's own speed
+    stall: float = 0.0      # each stream stalled (gaps in, tready low out) this often a clock
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
@@ -50,7 +51,7 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
         scenario = str(_recording(Path(scenario), args.steps, work))
     spec = {"steps": args.steps, "particles": args.particles, "seed": args.seed,
             "scenario": scenario, "out": str(out), "progress": str(progress_file),
-            "bare": args.bare}
+            "bare": args.bare, "stall": args.stall}
     log = build_root / cfg.name / f"{module}-{args.sim}{'-gate' if args.gate else ''}.log"
     result: dict[str, Any] = {}
 
