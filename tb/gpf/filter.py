@@ -24,7 +24,7 @@ from typing import Any
 import cocotb
 import numpy as np
 from cocotb.handle import SimHandleBase
-from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge
+from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, SimTimeoutError, with_timeout
 
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
@@ -41,9 +41,13 @@ from gpf.tb.gpf import coverage as filter_coverage
 from gpf.tb.gpf.feeds import HarnessFeed, Layout, StepBeats, StreamFeed
 from gpf.tb.gpf.ip import Ip
 from gpf.tb.gpf.model_ahead import Checker, Expected, ModelAhead
-from gpf.tb.harness import Bench, reset, start
+from gpf.tb.harness import CLOCK_NS, Bench, reset, start
 from gpf.tb.scoreboard import Field, Scoreboard, pack
 from gpf.tb.stream import Sink, Source, StreamDriver, StreamLoop
+
+# clocks a seed or init beat may wait for its tready: a whole step's and more (the filter takes
+# an init while idle or ready, a seed word within a few clocks)
+SEND_CLOCKS = 10_000
 
 # every output port of gpf_<app>: defined (no X or Z) from reset on
 OUTPUTS = ["s_init_tready", "s_step_tready", "m_est_tvalid", "m_est_tdata"] + [
@@ -248,7 +252,14 @@ class FilterBench:
             words = [w ^ ((1 << field.width) - 1) for w in words]
         drv = StreamDriver(self.clk, self.dut, name, idle, self.b.rng(f"{name}{tag}"),
                            has_last=bool(self.ip))
-        await drv.send([(word, True) for word in words])
+        # a filter that never takes a seed or init beat fails here, not at the wall clock
+        limit = SEND_CLOCKS * (len(words) + 1) * (1 + int(10 * idle))
+        try:
+            await with_timeout(drv.send([(word, True) for word in words]), limit * CLOCK_NS,
+                               "ns")
+        except SimTimeoutError:
+            raise AssertionError(f"{name}: {len(words)} beats not all taken in {limit} clocks"
+                                 ) from None
 
     async def begin(self) -> None:
         """Idle inputs, then the clock (once) and a reset; every output defined after it."""
