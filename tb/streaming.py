@@ -165,23 +165,29 @@ async def check_latency_and_throughput(dut: SimHandleBase, block: StreamBlock, b
                                        operands: Operands | None = None) -> None:
     """Without stalls: the first result LATENCY clocks after the first beat (reducing: after
     the step's last), a new input beat every INTERVAL clocks, so n beats (one step) take
-    (n - 1) INTERVAL + 1 + LATENCY clocks."""
+    (n - 1) INTERVAL + 1 + LATENCY clocks: after reset, and again for a step that follows
+    another after 1, 2 and 3 idle clocks (a block's state after a step, its beats' parity)."""
     idle_inputs(dut)
     await start(dut)
     await ClockCycles(dut.clk, 3)
-    tag = f"{block.name}-tp"
     lasts = [True] * n if block.interval > 1 else [False] * (n - 1) + [True]
-    ops = operands(sum(lasts), tag) if operands else None
-    sb, mon_in, mon_out = await run_stream(dut, block, b, inputs(n, tag), lasts, 0.0, 0.0,
-                                           tag, ops=ops)
-    sb.assert_clean()
-    first_in = mon_in.beats[0].cycle
-    answered = mon_in.beats[-1 if block.reduces else 0].cycle
-    latency = mon_out.beats[0].cycle - answered
-    assert latency == block.latency, f"latency {latency}, manifest says {block.latency}"
-    span = mon_out.beats[-1].cycle - first_in + 1
-    due = (n - 1) * block.interval + 1 + block.latency
-    assert span == due, f"{n} beats took {span} clocks, expected {due}"
+    for idle in (None, 1, 2, 3):   # None: the step after reset
+        if idle is not None:
+            await ClockCycles(dut.clk, idle)
+        tag = f"{block.name}-tp" + (f"-after{idle}" if idle is not None else "")
+        ops = operands(sum(lasts), tag) if operands else None
+        sb, mon_in, mon_out = await run_stream(dut, block, b, inputs(n, tag), lasts, 0.0, 0.0,
+                                               tag, ops=ops)
+        sb.assert_clean()
+        first_in = mon_in.beats[0].cycle
+        answered = mon_in.beats[-1 if block.reduces else 0].cycle
+        latency = mon_out.beats[0].cycle - answered
+        after = "" if idle is None else f" (a step {idle} clocks after another's end)"
+        assert latency == block.latency, \
+            f"latency {latency}, manifest says {block.latency}{after}"
+        span = mon_out.beats[-1].cycle - first_in + 1
+        due = (n - 1) * block.interval + 1 + block.latency
+        assert span == due, f"{n} beats took {span} clocks, expected {due}{after}"
 
 
 async def check_corrupted_model_is_caught(dut: SimHandleBase, block: StreamBlock, b: Bench,
