@@ -132,16 +132,22 @@ def test_ip_short() -> None:
 
 
 @pytest.mark.regress
-@pytest.mark.parametrize("config,lanes,particles", [("bot", 1, 2048), ("uav", 2, 512)])
+@pytest.mark.parametrize("config,lanes,particles", [
+    pytest.param("bot", 1, 2048, marks=pytest.mark.xdist_group("gpf-ip-bot")),
+    pytest.param("uav", 2, 512, marks=pytest.mark.xdist_group("gpf-ip-uav"))])
 def test_ip_regression(config: str, lanes: int, particles: int) -> None:
     result, res = filter_run(config, "verilator", lanes, 50, particles, seed=13, ip=True)
     check_run(result, res, 50, particles, lanes, tests=len(IP_TESTS))
 
 
+# Each run shares its build folder (and the harness's record files in it) with the other runs
+# of its config, LANES and simulator: shared_build keeps them on one pytest -n worker, one at a
+# time (two at once in one folder read each other's records)
 @pytest.mark.regress
-@pytest.mark.parametrize("config,lanes,particles", [("bot", 1, 2048), ("bot", 2, 2048),
-                                                   ("uav", 1, 2048), ("odd", 2, 1020),
-                                                   ("uav_seed002", 2, 1024)])
+@pytest.mark.parametrize("config,lanes,particles", [
+    pytest.param(*run, marks=shared_build(run[0], "verilator", run[1]))
+    for run in [("bot", 1, 2048), ("bot", 2, 2048), ("uav", 1, 2048), ("odd", 2, 1020),
+                ("uav_seed002", 2, 1024)]])
 def test_filter_regression(config: str, lanes: int, particles: int) -> None:
     result, res = filter_run(config, "verilator", lanes, 50, particles, seed=11)
     check_run(result, res, 50, particles, lanes)
@@ -154,6 +160,7 @@ LONG_RATIO_MAX = 1.05
 
 
 @pytest.mark.regress
+@pytest.mark.xdist_group(build_group("uav", "verilator", 1))
 def test_uav_long_flight_quality() -> None:
     spec = LONG_UAV
     result, res = filter_run("uav", "verilator", 1, spec["steps"], spec["particles"],
