@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gpf.outputs import atomic_write_text
+from gpf.rtl.filter import HARNESS_DIR
 
 LINE_KINDS = ("line", "branch")
 
@@ -183,7 +184,8 @@ def report(cov_dir: Path, holes_file: Path) -> CodeReport | None:
         return None
     out_dir = cov_dir / "code"
     points = read_dats(dats)
-    places = by_place(points)
+    # the testbench harness (rtl/tb/, in no file list) is not the design: left out
+    places = {k: v for k, v in by_place(points).items() if f"/rtl/{HARNESS_DIR}/" not in k[0]}
     paths = write_outputs(points, places, out_dir)
     lines: dict[tuple, int] = defaultdict(int)
     toggles: dict[tuple, int] = defaultdict(int)
