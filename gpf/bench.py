@@ -26,9 +26,11 @@ PARTICLES = (512, 1024, 2048)
 LANES = (1, 2, 4)
 
 
-def _run(config: str, lanes: int, particles: int, steps: int, sim: str) -> dict[str, Any]:
+def _run(config: str, lanes: int, particles: int, steps: int, sim: str,
+         direct: bool = False) -> dict[str, Any]:
     cfg = load_config(config_path(config), {"filter.lanes": lanes})
-    res = run_filter(cfg, RunArgs(steps, particles, 1, None, sim, False), progress=False)
+    res = run_filter(cfg, RunArgs(steps, particles, 1, None, sim, False, direct=direct),
+                     progress=False)
     if res["mismatches"] or not res["passed"]:
         raise SystemExit(f"bench: {config} N={particles} LANES={lanes} on {sim} failed: "
                          f"{res['first_mismatch']} (see {res['log']})")
@@ -62,6 +64,15 @@ SPEED_PARTICLES, SPEED_STEPS = 2048, 100   # the whole bot filter's checking spe
 ICARUS_PARTICLES, ICARUS_STEPS = 256, 3
 
 
+def direct_bare_speed(config: str, lanes: int, particles: int, steps: int) -> float:
+    """Particles a second of the direct run's binary alone (gpf_<app>_direct, nothing read or
+    checked): the simulator's own speed on this RTL and harness."""
+    from gpf.tb.gpf import direct
+
+    cfg = load_config(config_path(config), {"filter.lanes": lanes})
+    return steps * particles / direct.bare(cfg, steps, particles)
+
+
 def bare_speed(config: str, lanes: int, particles: int, steps: int) -> float:
     """Particles a second of the simulator alone on the same RTL and harness: no model, nothing
     read or checked, cocotb only waiting for the last result (RunSpec.bare)."""
@@ -77,22 +88,28 @@ def bare_speed(config: str, lanes: int, particles: int, steps: int) -> float:
 def speed_table(config: str = "bot", particles: int = SPEED_PARTICLES,
                 steps: int = SPEED_STEPS) -> tuple[list[str], dict]:
     """Particles checked a second (every particle, weight and estimate bit-exact), beside the
-    bare simulator's speed on the same RTL, at LANES 1, 2 and 4 on Verilator; Icarus at LANES
-    1 on a short run."""
+    bare simulator's speed on the same RTL, at LANES 1, 2 and 4 on Verilator: the direct run
+    (no cocotb) and its binary alone, the cocotb run and the harness alone under cocotb; Icarus
+    at LANES 1 on a short run."""
     rows = {}
     for lanes in LANES:
-        checked = _run(config, lanes, particles, steps, "verilator")["particles_per_second"]
-        bare = bare_speed(config, lanes, particles, steps)
-        rows[lanes] = {"checked": round(checked), "bare": round(bare),
-                       "ratio": round(checked / bare, 3)}
+        checked = _run(config, lanes, particles, steps, "verilator", direct=True)
+        bare = direct_bare_speed(config, lanes, particles, steps)
+        cocotb = _run(config, lanes, particles, steps, "verilator")["particles_per_second"]
+        cocotb_bare = bare_speed(config, lanes, particles, steps)
+        rows[lanes] = {"checked": round(checked["particles_per_second"]), "bare": round(bare),
+                       "ratio": round(checked["particles_per_second"] / bare, 3),
+                       "cocotb_checked": round(cocotb), "cocotb_bare": round(cocotb_bare)}
     icarus = _run(config, 1, ICARUS_PARTICLES, ICARUS_STEPS, "icarus")["particles_per_second"]
     lines = [f"simulation speed, {config}, N = {particles}, {steps} steps, every particle, "
-             "weight and estimate checked bit for bit (Verilator); bare: the same RTL and "
-             "harness, nothing checked:", "",
-             "| LANES | particles checked / s | bare simulator, particles / s | checked / bare |",
-             "|---|---|---|---|"]
-    lines += [f"| {lanes} | {r['checked']} | {r['bare']} | {r['ratio']:.2f} |"
-              for lanes, r in rows.items()]
+             "weight and estimate checked bit for bit (Verilator). Direct: gpf run --direct, "
+             "no cocotb; bare: its binary alone, nothing checked; cocotb: gpf run, and the "
+             "harness alone under cocotb:", "",
+             "| LANES | direct, particles checked / s | bare simulator, particles / s | "
+             "direct / bare | cocotb, checked / s | cocotb, harness alone / s |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {lanes} | {r['checked']} | {r['bare']} | {r['ratio']:.2f} | "
+              f"{r['cocotb_checked']} | {r['cocotb_bare']} |" for lanes, r in rows.items()]
     lines.append(f"\nIcarus, N = {ICARUS_PARTICLES}, {ICARUS_STEPS} steps, LANES 1: "
                  f"{icarus:.0f} particles checked / s")
     return lines, {"verilator": rows, "icarus": round(icarus)}

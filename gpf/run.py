@@ -31,6 +31,7 @@ class RunArgs:
     ip: bool = False        # through gpf_<app>_axi: AXI4-Lite registers, byte-wide streams
     bare: bool = False      # the harness alone, nothing checked: the simulator's own speed
     stall: float = 0.0      # each stream stalled (gaps in, tready low out) this often a clock
+    direct: bool = False    # without cocotb: a Verilator binary, checked as it runs (direct.py)
 
 
 def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
@@ -40,7 +41,10 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     settings, wall time and speed added. `template_dir`: other templates (a mutant's), built
     in a `build_root` of their own: only the filter's modules are generated."""
     module = f"gpf_{cfg.app}_axi" if args.ip else f"gpf_{cfg.app}"
-    work = sim_build_dir((build_root / cfg.name).resolve(), args.sim, module,
+    if args.direct and (args.ip or args.gate or args.waves or args.sim != "verilator"):
+        raise ValueError("a direct run is the core's RTL on Verilator, without waves")
+    work = sim_build_dir((build_root / cfg.name).resolve(), args.sim,
+                         module + ("_direct" if args.direct else ""),
                          "gate" if args.gate else None)
     work.mkdir(parents=True, exist_ok=True)
     out, progress_file = work / "run.json", work / "progress"
@@ -52,10 +56,14 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     spec = {"steps": args.steps, "particles": args.particles, "seed": args.seed,
             "scenario": scenario, "out": str(out), "progress": str(progress_file),
             "bare": args.bare, "stall": args.stall}
-    log = build_root / cfg.name / f"{module}-{args.sim}{'-gate' if args.gate else ''}.log"
+    log = build_root / cfg.name / (f"{module}-{args.sim}{'-gate' if args.gate else ''}"
+                                   f"{'-direct' if args.direct else ''}.log")
     result: dict[str, Any] = {}
 
     def simulate() -> None:
+        if args.direct:
+            result["sim"] = run_direct(cfg, spec, build_root, log)
+            return
         result["sim"] = run_sim(cfg, module, args.sim, waves=args.waves, seed=args.seed,
                                 testcase="test_filter", extra_env={"GPF_RUN": json.dumps(spec)},
                                 log_file=log, build_root=build_root, gate=args.gate,
@@ -77,6 +85,8 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
         raise RuntimeError(f"the simulation did not run: see {log}")
     sim = result["sim"]
     if not out.exists():
+        if getattr(sim, "error", None):
+            raise RuntimeError(f"{sim.error} (see {log})")
         raise RuntimeError(f"the testbench wrote no results ({sim.failed}/{sim.tests} tests "
                            f"failed): see {log}")
     res = json.loads(out.read_text())
@@ -90,6 +100,41 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                particles_per_second=round(res["particles_checked"] / res["wall_seconds"], 1),
                waves=str(sim.waves) if sim.waves else None)
     return res
+
+
+@dataclass(frozen=True)
+class DirectResult:
+    """What a direct run reports in place of cocotb's results: passed, or why not."""
+
+    passed: bool
+    failed: int
+    tests: int = 1
+    waves: None = None
+    error: str | None = None
+
+
+def run_direct(cfg: Config, spec: dict[str, Any], build_root: Path, log: Path) -> DirectResult:
+    """A cocotb-free run (gpf.tb.gpf.direct) with test_filter's checks: every value equal,
+    every particle checked, each step's cycle count the period between results (no stalls)."""
+    from gpf.tb.gpf import direct
+    from gpf.tb.gpf.filter import RunSpec, write_result
+
+    run_spec = RunSpec(**spec)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with log.open("w") as f:
+        try:
+            res = direct.run(cfg, run_spec, build_root, log=f)
+        except direct.DirectError as exc:
+            f.write(f"FAILED: {exc}\n")
+            return DirectResult(False, 1, error=str(exc))
+        write_result(res, run_spec.out)
+        why = ("mismatches" if res.mismatches else
+               "particles not all checked" if res.particles_checked != res.steps * res.particles
+               else "cycle counts differ from the period between results"
+               if not run_spec.stall and res.period_per_step != res.cycles_per_step[1:] else None)
+        f.write(f"{'FAILED: ' + why if why else 'PASSED'}: {res.particles_checked} particles, "
+                f"{res.mismatches} mismatches\n")
+    return DirectResult(why is None, int(why is not None), error=why)
 
 
 def _recording(path: Path, steps: int, work: Path) -> Path:
@@ -108,7 +153,7 @@ def _recording(path: Path, steps: int, work: Path) -> Path:
 
 
 def sim_label(args: RunArgs) -> str:
-    return args.sim + (" gate-level" if args.gate else "")
+    return args.sim + (" gate-level" if args.gate else "") + (" direct" if args.direct else "")
 
 
 def plot_paths(cfg: Config, args: RunArgs, directory: str | Path) -> list[str]:

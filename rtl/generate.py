@@ -1283,6 +1283,11 @@ def generate(cfg: Config, out_dir: Path | None = None, modules: list[str] | None
                 module=module.harness, config_file=config_file, config_name=cfg.name,
                 regenerate=regenerate, **harness_context(cfg))
             harnesses[name] = out_dir / harness
+            # its cocotb-free toplevel (tb/gpf/direct.py), around the harness
+            direct = f"{HARNESS_DIR}/{module.top}_direct.sv"
+            texts[direct] = env.get_template("gpf_direct.sv.j2").render(
+                module=f"{module.top}_direct", harness=module.harness, config_file=config_file,
+                config_name=cfg.name, regenerate=regenerate, **harness_context(cfg))
         manifest["modules"][name] = {
             "top": module.top,
             "files": [f"{part}.sv" for part in module.files()],

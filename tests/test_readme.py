@@ -38,6 +38,7 @@ VERDICT = {
     "--json u.json": SLOW,
     "gpf run --config bot --scenario bot_manoeuvring_observer --json m.json": SLOW,
     "gpf run --config bot --ip --steps 5 --particles 512 --json ip.json": SLOW,
+    "gpf run --config bot --steps 100 --particles 2048 --direct --json d.json": SLOW,
     "gpf sim --module grng --config odd --sim icarus --seed 42": SLOW,
     "gpf sim --module grng --set filter.lanes=2": SLOW,
     "gpf synth --config uav --set filter.lanes=2 --module moments --json area.json":

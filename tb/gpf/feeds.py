@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import random
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from cocotb.handle import SimHandleBase
@@ -85,39 +87,41 @@ def stall_level(stall: float) -> int:
     return min(256, max(0, round(stall * 256)))
 
 
-class HarnessFeed:
-    """The run's steps through gpf_<app>_harness (see the module's docstring)."""
+def write_stimulus(workdir: Path, step_words: list[int], step_w: int) -> None:
+    """The step beats the harness's $readmemh reads."""
+    digits = -(-step_w // 4)
+    (workdir / STIMULUS).write_text("".join(f"{w:0{digits}x}\n" for w in step_words))
 
-    def __init__(self, dut: SimHandleBase, layout: Layout, stall: float, stall_seed: int,
-                 workdir: Path = Path(".")):
-        self.dut, self.layout, self.stall, self.seed = dut, layout, stall, stall_seed
-        self.workdir = workdir
-        self.files: dict[str, object] = {}
+
+class Records:
+    """The harness's record files of a run, read a step at a time (in any thread: no simulator
+    handle). A step's beats are all there once its result's line is: the harness flushes the
+    three files together, m_est's last."""
+
+    def __init__(self, layout: Layout, workdir: Path = Path(".")):
+        self.layout, self.workdir = layout, workdir
+        self.files: dict[str, BinaryIO] = {}
         # a record line: tlast's digit, tdata's digits, a newline; m_est's: cycle, space, tdata
-        self.digits = {tap: -(-layout.width(tap) // 4) for tap in RECORDS}
-        self.line = {"cond": 2 + self.digits["cond"], "part": 2 + self.digits["part"],
-                     "est": 10 + self.digits["est"]}
+        digits = {tap: -(-layout.width(tap) // 4) for tap in RECORDS}
+        self.line = {"cond": 2 + digits["cond"], "part": 2 + digits["part"],
+                     "est": 10 + digits["est"]}
 
-    async def start(self, step_words: list[int], step_w: int) -> None:
-        """Preload the step beats, then hand the core's streams to the harness."""
-        digits = -(-step_w // 4)
-        (self.workdir / STIMULUS).write_text("".join(f"{w:0{digits}x}\n" for w in step_words))
-        d = self.dut
-        d.steps.value = len(step_words)
-        d.stall.value = stall_level(self.stall)
-        d.stall_seed.value = self.seed
-        d.fast.value = 1
-        d.load.value = 1
-        await RisingEdge(d.clk)   # the harness loads at this edge (load rose)
-        await ReadOnly()          # and has opened its records by now
-        await RisingEdge(d.clk)
-        d.load.value = 0
+    def remove(self) -> None:
+        """An earlier run's records gone (a run that never opens its own must not read them)."""
+        for name in RECORDS.values():
+            (self.workdir / name).unlink(missing_ok=True)
+
+    def open(self) -> None:
         for tap, name in RECORDS.items():
             self.files[tap] = (self.workdir / name).open("rb")
 
+    def results(self) -> int:
+        """The results recorded so far (complete lines of m_est)."""
+        path = self.workdir / RECORDS["est"]
+        return path.stat().st_size // self.line["est"] if path.exists() else 0
+
     def read(self, k: int, beats: int) -> StepBeats:
-        """Step k's beats from the records (its result is out: every beat of it is there).
-        Touches no simulator handle: it runs in the checker's thread."""
+        """Step k's beats (its result is out: every beat of it is there)."""
         lasts, taps = {}, {}
         for tap in ("cond", "part"):
             rows = self._rows(tap, beats, k)
@@ -126,19 +130,6 @@ class HarnessFeed:
         row = self._rows("est", 1, k)
         est = self._unpack("est", row[:, 9:-1], k)
         return StepBeats(lasts, taps, est, int(bytes(row[0, :8]), 16))
-
-    async def wait(self, k: int, limit: int) -> None:
-        """Until the k-th result is out (failing after `limit` clocks, or on a violation)."""
-        d = self.dut
-        timeout = Timer(limit * CLOCK_NS, "ns")
-        while int(d.est_count.value) < k:
-            self.check_protocol()
-            if await First(ValueChange(d.est_count), timeout) is timeout:
-                raise AssertionError(f"step {k}: no result after {limit} clocks "
-                                     f"({int(d.step_count.value)} step beats taken, "
-                                     f"{int(d.cond_count.value)} m_cond and "
-                                     f"{int(d.part_count.value)} m_part beats out)")
-        self.check_protocol()
 
     def _rows(self, tap: str, n: int, k: int) -> np.ndarray:
         size = self.line[tap]
@@ -154,6 +145,64 @@ class HarnessFeed:
             return self.layout.unpack_tap(tap, digits, hex_digits=True)
         except ValueError as exc:   # the harness flags X or Z first: a harness fault
             raise AssertionError(f"step {k}: m_{tap}: undefined bits recorded ({exc})") from None
+
+    def close(self) -> None:
+        for f in self.files.values():
+            f.close()
+
+
+def stall_counts(read: Callable[[str], list[int]]) -> tuple[Stalls, dict[str, Stalls]]:
+    """The harness's stall records, read(port) giving its four counts: s_step's and each
+    output's (their bins' counts, each under the smallest length of its bin)."""
+    g = read("step_gaps")
+    step = Stalls(Counter({0: g[0], 1: g[1], 2: g[2]}), Counter({1: g[3]}))
+    sinks = {}
+    for tap in RECORDS:
+        w = read(f"{tap}_waits")
+        sinks[tap] = Stalls(waits=Counter({0: w[0], 1: w[1], 2: w[2], 4: w[3]}))
+    return step, sinks
+
+
+class HarnessFeed:
+    """The run's steps through gpf_<app>_harness (see the module's docstring)."""
+
+    def __init__(self, dut: SimHandleBase, layout: Layout, stall: float, stall_seed: int,
+                 workdir: Path = Path(".")):
+        self.dut, self.layout, self.stall, self.seed = dut, layout, stall, stall_seed
+        self.workdir = workdir
+        self.records = Records(layout, workdir)
+
+    async def start(self, step_words: list[int], step_w: int) -> None:
+        """Preload the step beats, then hand the core's streams to the harness."""
+        write_stimulus(self.workdir, step_words, step_w)
+        d = self.dut
+        d.steps.value = len(step_words)
+        d.stall.value = stall_level(self.stall)
+        d.stall_seed.value = self.seed
+        d.fast.value = 1
+        d.load.value = 1
+        await RisingEdge(d.clk)   # the harness loads at this edge (load rose)
+        await ReadOnly()          # and has opened its records by now
+        await RisingEdge(d.clk)
+        d.load.value = 0
+        self.records.open()
+
+    def read(self, k: int, beats: int) -> StepBeats:
+        """Step k's beats from the records (in the checker's thread)."""
+        return self.records.read(k, beats)
+
+    async def wait(self, k: int, limit: int) -> None:
+        """Until the k-th result is out (failing after `limit` clocks, or on a violation)."""
+        d = self.dut
+        timeout = Timer(limit * CLOCK_NS, "ns")
+        while int(d.est_count.value) < k:
+            self.check_protocol()
+            if await First(ValueChange(d.est_count), timeout) is timeout:
+                raise AssertionError(f"step {k}: no result after {limit} clocks "
+                                     f"({int(d.step_count.value)} step beats taken, "
+                                     f"{int(d.cond_count.value)} m_cond and "
+                                     f"{int(d.part_count.value)} m_part beats out)")
+        self.check_protocol()
 
     def check_protocol(self) -> None:
         d = self.dut
@@ -172,25 +221,13 @@ class HarnessFeed:
         assert int(d.est_count.value) == steps, "extra result beats"
         assert int(d.cond_count.value) == int(d.part_count.value) == steps * beats, \
             "extra tap beats"
-        self.stalls = self._stalls()
-        d.fast.value = 0
-        for f in self.files.values():
-            f.close()
-
-    def _stalls(self) -> tuple[Stalls, dict[str, Stalls]]:
-        """The harness's stall records: s_step's and each output's (their bins' counts, each
-        under the smallest length of its bin)."""
         def counts(port: str) -> list[int]:
             v = int(getattr(self.dut, port).value)
             return [(v >> (32 * i)) & 0xFFFFFFFF for i in range(4)]
 
-        g = counts("step_gaps")
-        step = Stalls(Counter({0: g[0], 1: g[1], 2: g[2]}), Counter({1: g[3]}))
-        sinks = {}
-        for tap in RECORDS:
-            w = counts(f"{tap}_waits")
-            sinks[tap] = Stalls(waits=Counter({0: w[0], 1: w[1], 2: w[2], 4: w[3]}))
-        return step, sinks
+        self.stalls = stall_counts(counts)
+        d.fast.value = 0
+        self.records.close()
 
 
 class StreamFeed:

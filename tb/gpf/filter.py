@@ -202,6 +202,100 @@ def scenario_of(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario]:
     return name, SCENARIOS[name](gpf.cfg, spec.steps, spec.seed)
 
 
+class Scorer:
+    """A run's steps scored against the model, one at a time in order (check_step), and what the
+    run reports of them: cycle counts, flags, ESS, both estimates. No simulator handle: it runs
+    in the checker's thread under cocotb, and in the cocotb-free run (direct.py)."""
+
+    def __init__(self, gpf: FixedGPF, s: Streams, spec: RunSpec, res_out: RunResult,
+                 mu0: np.ndarray, corrupt: bool = False, keep_beats: bool = False):
+        self.gpf, self.s, self.spec, self.res_out = gpf, s, spec, res_out
+        self.keep_beats = keep_beats
+        # scored in the checker's thread, which must not log (cocotb's log handler asks the
+        # simulator for the time): the first mismatch is logged after the run
+        self.boards = {name: Scoreboard(f"gpf_{gpf.dp.app}.{name}", fields,
+                                        expect_mismatch=corrupt, log=QUIET)
+                       for name, fields in (("cond", s.cond), ("part", s.part + [SHIFT]),
+                                            ("est", s.est))}
+        self.sticky, self.est_cycles = 0, []
+        self.scored: list[StepBeats] = []   # every step's beats, for functional coverage
+        self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
+        self.reported = time.monotonic()
+
+    def check_step(self, k: int, got: StepBeats, exp: Expected, beats: int, steps: int) -> None:
+        """Step k scored, and what the run reports of it."""
+        gpf, res, res_out = self.gpf, exp.res, self.res_out
+        self.sticky |= res.flags
+        self.score_step(k, exp, got, beats, self.sticky)
+        if self.keep_beats:
+            self.scored.append(got)
+        res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
+        est = got.est
+        self.est_cycles.append(got.est_cycle)
+        res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
+        res_out.flags.append(flag_names(int(est["flags"][0, 0])))
+        res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
+        self.rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
+                                                     for i in range(gpf.dp.n)])))
+        self.fixed_mu.append(gpf.to_real_mu(res.mu))
+        res_out.particles_checked += gpf.particles
+        # a file written a few times a second: a write each step costs more than the step
+        if self.spec.progress and (k == steps or time.monotonic() - self.reported > 0.25):
+            Path(self.spec.progress).write_text(f"{k} {self.mismatches}\n")
+            self.reported = time.monotonic()
+
+    def score_step(self, k: int, exp: Expected, got: StepBeats, beats: int,
+                   sticky: int) -> None:
+        """Every particle's fields on both taps, each tap's tlast, the result (its cycle count
+        aside: test_filter checks it against the period between results)."""
+        lo = (k - 1) * beats
+        for tap, fields in (("cond", exp.cond), ("part", exp.part)):
+            lasts = got.lasts[tap]
+            assert not lasts[:-1].any() and lasts[-1], f"step {k}: {tap} tlast wrong"
+            self.boards[tap].compare(fields, got.taps[tap], first_beat=lo)
+        exp_est = expected_est(self.s, exp.res, sticky)
+        exp_est["cycles"] = got.est["cycles"]
+        self.boards["est"].compare(exp_est, got.est, first_beat=k - 1)
+
+    def finish(self) -> None:
+        """The run's totals into its result (its first mismatch, the period between results)."""
+        res_out = self.res_out
+        res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
+        res_out.mismatches = self.mismatches
+        res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
+                                       if b.first_mismatch), None)
+        res_out.period_per_step = [b - a for a, b in zip(self.est_cycles, self.est_cycles[1:],
+                                                         strict=False)]
+
+    @property
+    def mismatches(self) -> int:
+        return sum(b.mismatched for b in self.boards.values())
+
+
+def init_values(gpf: FixedGPF, mu: np.ndarray, sigma0: np.ndarray, sent: int | None
+                ) -> dict[str, int]:
+    """The init beat: N (`sent`, or the run's), the raw mu0 and the raw Sigma0 (real sigma0)."""
+    out = {"particles": gpf.particles if sent is None else sent}
+    out |= {f"mu{i}": int(v) for i, v in enumerate(mu)}
+    return out | {f"s{i}_{j}": v for (i, j), v in gpf.quantise_sigma(sigma0).items()}
+
+
+def run_inputs(gpf: FixedGPF, spec: RunSpec) -> tuple[str, Scenario, tuple, list[dict]]:
+    """A run's scenario (its name), the model's start (mu, chol, sigma, and the real Sigma0)
+    and every step's raw inputs."""
+    name, sc = scenario_of(gpf, spec)
+    mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
+    mu, chol = gpf.init(mu0, sigma0)
+    raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, sc.steps + 1)]
+    return name, sc, (mu, chol, gpf.quantise_sigma(sigma0), sigma0), raw_inputs
+
+
+def step_limit(beats: int, stall: float) -> int:
+    """Clocks a result may take before the run calls it a hang (a lost beat): a step takes
+    N / LANES + 236 or so clocks, a few times that with every stream stalled half the time."""
+    return 10 * (beats + 300) * (1 + int(10 * stall))
+
+
 class FilterBench:
     """Drives gpf_<app> through a run and scores every stream against the model."""
 
@@ -220,13 +314,7 @@ class FilterBench:
         self.clk = dut.aclk if self.ip else dut.clk
         # gpf_<app>_harness around the core: it runs the clock, and the run's steps (feeds.py)
         self.harness = hasattr(dut, "fast")
-        # scored in the checker's thread, which must not log (cocotb's log handler asks the
-        # simulator for the time): the first mismatch is logged after the run
-        self.boards = {name: Scoreboard(f"gpf_{self.gpf.dp.app}.{name}", fields,
-                                        expect_mismatch=corrupt, log=QUIET)
-                       for name, fields in (("cond", self.s.cond),
-                                            ("part", self.s.part + [SHIFT]),
-                                            ("est", self.s.est))}
+        self.scorer: Scorer | None = None   # the run's, from its first step on
 
     def idle(self) -> None:
         d = self.dut
@@ -287,11 +375,10 @@ class FilterBench:
         d, gpf = self.dut, self.gpf
         await self.begin()
         await self.send("s_seed", seed_words(self.spec.seed + 1, gpf.dp.draws() * gpf.cfg.lanes))
-        _, sc = scenario_of(gpf, self.spec)
-        mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
-        mu, _ = gpf.init(mu0, sigma0)
-        await self.send("s_init", [one_beat(self.s.init, self.init_values(mu, sigma0))])
-        raw = gpf.quantise_inputs(sc.step_inputs(1))
+        _, _, (mu, _, _, sigma0), raw_inputs = run_inputs(gpf, self.spec)
+        await self.send("s_init", [one_beat(self.s.init, init_values(
+            gpf, mu, sigma0, self.spec.init_particles))])
+        raw = raw_inputs[0]
         rng = self.b.rng("interrupt")
         step_in = Source(d, "s_step", 0.0, rng, [(one_beat(self.s.step, step_values(gpf, raw)),
                                                   True)], has_last=bool(self.ip))
@@ -302,31 +389,20 @@ class FilterBench:
         loop.stop()
         filter_coverage.sample_reset(self, len(cond.beats))
 
-    def init_values(self, mu: np.ndarray, sigma0: np.ndarray) -> dict[str, int]:
-        """The init beat: N, the raw mu0 and the raw Sigma0 (real sigma0)."""
-        sent = self.spec.init_particles
-        out = {"particles": self.gpf.particles if sent is None else sent}
-        out |= {f"mu{i}": int(v) for i, v in enumerate(mu)}
-        return out | {f"s{i}_{j}": v for (i, j), v in self.gpf.quantise_sigma(sigma0).items()}
-
     async def run(self) -> RunResult:
         spec, gpf, s = self.spec, self.gpf, self.s
         lanes = gpf.cfg.lanes
-        name, sc = scenario_of(gpf, spec)
+        began = time.monotonic()
+        name, sc, (mu, chol, sigma, sigma0), raw_inputs = run_inputs(gpf, spec)
         steps = sc.steps
         res_out = RunResult(steps, gpf.particles, lanes, gpf.cfg.name, cocotb.SIM_NAME,
                             spec.seed, name)
-        began = time.monotonic()
         await self.begin()
         stall = spec.stall
         if spec.load_seed:
             await self.send("s_seed", seed_words(spec.seed, gpf.dp.draws() * lanes), stall)
-        mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
-        mu, chol = gpf.init(mu0, sigma0)
-        sigma = gpf.quantise_sigma(sigma0)
-        await self.send("s_init", [one_beat(s.init, self.init_values(mu, sigma0))], stall)
-
-        raw_inputs = [gpf.quantise_inputs(sc.step_inputs(k)) for k in range(1, steps + 1)]
+        await self.send("s_init", [one_beat(s.init, init_values(gpf, mu, sigma0,
+                                                                spec.init_particles))], stall)
         step_words = [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs]
         feed = self.feed(steps)
         await feed.start(step_words, sum(f.fmt.width for f in s.step))
@@ -346,15 +422,14 @@ class FilterBench:
         await feed.finish(steps, gpf.particles // lanes)
         if self.ip:
             self.check_framing(feed.beats)
-        filter_coverage.sample_run(self, self.scored,
+        scorer = self.scorer
+        filter_coverage.sample_run(self, scorer.scored,
                                    [bt.last for bt in feed.beats["est"]] if self.ip else None,
                                    *feed.stalls)
-        res_out.values_checked = sum(b.matched + b.mismatched for b in self.boards.values())
-        res_out.mismatches = self.mismatches
-        res_out.first_mismatch = next((b.first_mismatch for b in self.boards.values()
-                                       if b.first_mismatch), None)
+        scorer.finish()
         res_out.wall_seconds = round(time.monotonic() - began, 3)
-        acc = accuracy(gpf, sc, model.draws(), np.array(self.rtl_mu), np.array(self.fixed_mu))
+        acc = accuracy(gpf, sc, model.draws(), np.array(scorer.rtl_mu),
+                       np.array(scorer.fixed_mu))
         res_out.rmse, res_out.metrics, res_out.lost_track = acc.rmse, acc.metrics, acc.lost
         res_out.quantisation_error, res_out.estimates = acc.quantisation, acc.estimates
         return res_out
@@ -366,15 +441,11 @@ class FilterBench:
         estimates, the period between results)."""
         gpf = self.gpf
         beats = gpf.particles // gpf.cfg.lanes
-        # a step takes N / LANES + 235 or so clocks, a few times that with every stream stalled
-        # half the time: ten times as long is a hang (a lost beat), not a slow step
-        limit = 10 * (beats + 300) * (1 + int(10 * self.spec.stall))
-        self.sticky, self.est_cycles = 0, []
-        self.scored: list[StepBeats] = []   # every step's beats, for functional coverage
-        self.rtl_mu, self.fixed_mu = [gpf.to_real_mu(mu0)], [gpf.to_real_mu(mu0)]
-        self.reported = time.monotonic()
-        checker = Checker(lambda k: self.check_step(k, feed.read(k, beats), model.get(), beats,
-                                                     steps, res_out))
+        limit = step_limit(beats, self.spec.stall)
+        self.scorer = scorer = Scorer(gpf, self.s, self.spec, res_out, mu0, self.corrupt,
+                                      keep_beats=coverage.enabled())
+        checker = Checker(lambda k: scorer.check_step(k, feed.read(k, beats), model.get(), beats,
+                                                       steps))
         try:
             for k in range(1, steps + 1):
                 await feed.wait(k, limit)
@@ -382,35 +453,10 @@ class FilterBench:
             checker.finish()
         finally:
             checker.stop()
-            for board in self.boards.values():   # logged here, not from the checker's thread
+            for board in scorer.boards.values():   # logged here, not from the checker's thread
                 if board.first_mismatch:
                     report = self.dut._log.info if self.corrupt else self.dut._log.error
                     report("first mismatch: %s", board.first_mismatch)
-        res_out.period_per_step = [b - a for a, b in zip(self.est_cycles, self.est_cycles[1:],
-                                                         strict=False)]
-
-    def check_step(self, k: int, got: StepBeats, exp: Expected, beats: int, steps: int,
-                   res_out: RunResult) -> None:
-        """Step k scored, and what the run reports of it (in the checker's thread)."""
-        gpf, res = self.gpf, exp.res
-        self.sticky |= res.flags
-        self.score_step(k, exp, got, beats, self.sticky)
-        if coverage.enabled():
-            self.scored.append(got)
-        res_out.rescales += int(np.count_nonzero(res.particles["shift"][1:]))
-        est = got.est
-        self.est_cycles.append(got.est_cycle)
-        res_out.cycles_per_step.append(int(est["cycles"][0, 0]))
-        res_out.flags.append(flag_names(int(est["flags"][0, 0])))
-        res_out.ess.append(float(gpf.to_real_ess(est["ess"][0, 0])))
-        self.rtl_mu.append(gpf.to_real_mu(np.array([est[f"mu{i}"][0, 0]
-                                                     for i in range(gpf.dp.n)])))
-        self.fixed_mu.append(gpf.to_real_mu(res.mu))
-        res_out.particles_checked += gpf.particles
-        # a file written a few times a second: a write each step costs more than the step
-        if self.spec.progress and (k == steps or time.monotonic() - self.reported > 0.25):
-            Path(self.spec.progress).write_text(f"{k} {self.mismatches}\n")
-            self.reported = time.monotonic()
 
     async def bare(self, feed: HarnessFeed, res_out: RunResult, began: float) -> RunResult:
         """The simulator's own speed on this RTL: the harness runs every step, Python only
@@ -437,19 +483,6 @@ class FilterBench:
         return StreamFeed(self.dut, self.clk, layout, self.spec.stall, self.b.rng("streams"),
                           est_last=bool(self.ip))
 
-    def score_step(self, k: int, exp: Expected, got: StepBeats, beats: int,
-                   sticky: int) -> None:
-        """Every particle's fields on both taps, each tap's tlast, the result (its cycle count
-        aside: test_filter checks it against the period between results)."""
-        lo = (k - 1) * beats
-        for tap, fields in (("cond", exp.cond), ("part", exp.part)):
-            lasts = got.lasts[tap]
-            assert not lasts[:-1].any() and lasts[-1], f"step {k}: {tap} tlast wrong"
-            self.boards[tap].compare(fields, got.taps[tap], first_beat=lo)
-        exp_est = expected_est(self.s, exp.res, sticky)
-        exp_est["cycles"] = got.est["cycles"]
-        self.boards["est"].compare(exp_est, got.est, first_beat=k - 1)
-
     def check_framing(self, mons: dict[str, list]) -> None:
         """gpf_<app>_axi: every m_est beat a packet (TLAST), every stream's padding zero."""
         assert all(bt.last for bt in mons["est"]), "m_est: a beat without TLAST"
@@ -460,7 +493,7 @@ class FilterBench:
 
     @property
     def mismatches(self) -> int:
-        return sum(b.mismatched for b in self.boards.values())
+        return self.scorer.mismatches if self.scorer else 0
 
 
 @dataclass

@@ -14,7 +14,7 @@ from __future__ import annotations
 import queue
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +31,27 @@ class Expected:
     res: StepResult
     cond: dict[str, np.ndarray]
     part: dict[str, np.ndarray]
+
+
+def model_steps(gpf: FixedGPF, state: tuple, raw_inputs: list[dict], seed: int | None,
+                expect: Callable[[StepResult], tuple[dict, dict]],
+                corrupt: Callable[[np.ndarray], np.ndarray] | None,
+                draw_chunks: list[np.ndarray]) -> Iterator[Expected]:
+    """Steps 1..len(raw_inputs) of `gpf` from state (mu, chol, sigma), in order, with the GRNG
+    model's draws after a load of `seed` (None: after reset), CHUNK steps of draws at a time
+    (each chunk appended to `draw_chunks`; `corrupt` reorders it: the broken model)."""
+    stream = gpf.draw_stream(seed)
+    mu, chol, sigma = state
+    steps = len(raw_inputs)
+    for first in range(0, steps, CHUNK):
+        draws = stream.next(min(CHUNK, steps - first))
+        if corrupt:
+            draws = corrupt(draws)
+        draw_chunks.append(draws)
+        for i, e in enumerate(draws):
+            res = gpf.step(mu, chol, sigma, raw_inputs[first + i], e, keep_particles=True)
+            mu, chol, sigma = res.mu, res.chol, res.sigma
+            yield Expected(res, *expect(res))
 
 
 class ModelAhead:
@@ -55,20 +76,10 @@ class ModelAhead:
 
     def _run(self) -> None:
         try:
-            stream = self.gpf.draw_stream(self.seed)
-            mu, chol, sigma = self.state
-            steps = len(self.raw_inputs)
-            for first in range(0, steps, CHUNK):
-                draws = stream.next(min(CHUNK, steps - first))
-                if self.corrupt:
-                    draws = self.corrupt(draws)
-                self.draw_chunks.append(draws)
-                for i, e in enumerate(draws):
-                    res = self.gpf.step(mu, chol, sigma, self.raw_inputs[first + i], e,
-                                        keep_particles=True)
-                    mu, chol, sigma = res.mu, res.chol, res.sigma
-                    if not self._put(Expected(res, *self.expect(res))):
-                        return
+            for expected in model_steps(self.gpf, self.state, self.raw_inputs, self.seed,
+                                        self.expect, self.corrupt, self.draw_chunks):
+                if not self._put(expected):
+                    return
         except BaseException as exc:   # raised in the cocotb thread by get()
             self._put(exc)
 
