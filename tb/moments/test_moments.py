@@ -9,7 +9,8 @@ filter: relative to the best particle so far, rescaling the sums whenever a beat
 best. The corner test adds the edges: no particle within reach, one particle carrying the
 weight, all weights 1.0, a new best on every beat (and shifts that clear the sums), x far from
 ref (dx saturates), 1-beat steps, a full step of cfg.particles particles with the extreme values
-that size the accumulators, Sigma near zero and (uav) tiny or zero quaternions."""
+that size the accumulators, Sigma near zero, (uav) tiny or zero quaternions, and an ESS
+quotient exactly on a rounding boundary (ess_boundary: W^2 must be exact to its last bit)."""
 
 from __future__ import annotations
 
@@ -184,6 +185,25 @@ def random_steps(b: Bench, total: int, tag: str) -> Steps:
     return s
 
 
+def ess_boundary(dp: Datapath, lanes: int, max_beats: int) -> tuple[int, int, int] | None:
+    """(n_one, n_low, t_low): the fewest particles, n_one of weight 1.0 (t = 0) then n_low of
+    weight 2^-t_low, whose ESS quotient W^2 / sum w^2 sits exactly on a rounding boundary
+    (W^2 2^(f+1) an odd multiple of sum w^2): W^2 even one LSB off moves the rounded ESS. None
+    if no such step fits."""
+    f = dp.ess.frac_bits
+    one = int(dp.exp2(np.array([0]))[0])
+    for total in range(lanes, max_beats * lanes + 1, lanes):
+        for t_low in (1, 2, 3):
+            low = int(dp.exp2(np.array([t_low << dp.t.frac_bits]))[0])
+            for n_low in range(1, total):
+                n_one = total - n_low
+                w = n_one * one + n_low * low
+                ww = n_one * one * one + n_low * low * low
+                if ((w * w) << (f + 1)) % (2 * ww) == ww:
+                    return n_one, n_low, t_low
+    return None
+
+
 def corner_steps(b: Bench) -> Steps:
     s = Steps(b)
     dp, lanes, n = s.dp, s.lanes, s.dp.n
@@ -245,6 +265,11 @@ def corner_steps(b: Bench) -> Steps:
             x = np.broadcast_to(ref, (3, lanes, n)).copy()
             x[..., 4:] += rng.integers(-50, 51, size=(3, lanes, n - 4))
             s.add(x, exponents(rng, (3, lanes)), ref)
+    boundary = ess_boundary(dp, lanes, s.max_beats)   # W^2 exact to its last bit
+    if boundary:
+        n_one, n_low, t_low = boundary
+        x, ref = around((n_one + n_low) // lanes)
+        s.add(x, np.r_[np.zeros(n_one), np.full(n_low, float(t_low))].reshape(-1, lanes), ref)
     for _ in range(10):
         realistic_step(s, rng, int(rng.integers(1, 80)))
     return s
