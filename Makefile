@@ -63,7 +63,7 @@ all: help
 help:
 	@sed -n '2,4p' Makefile
 	@echo "  make sim [CONFIG=bot|uav] [SIM=icarus|verilator] [STEPS=n] [PARTICLES=1024] [SEED=n]"
-	@echo "             STEPS: the config's own by default (bot 50, uav 200); DIRECT=1: no cocotb, ~5x faster"
+	@echo "             STEPS: the config's own by default (bot 50, uav 200); DIRECT=1: without cocotb, about twice as fast"
 	@echo "  make sim MODULE=grng [CONFIG=bot] [SIM=icarus|verilator] [WAVES=1] [SEED=n]"
 	@echo "  make sim GATE=1 [MODULE=grng]   the synthesized netlist, same testbench"
 	@echo "  make synth [CONFIG=uav] [MODULE=moments] [LANES=2] | make timing [CONFIG=] [MODULE=] [SEED=]"

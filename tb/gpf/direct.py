@@ -130,13 +130,7 @@ def run(cfg: Config, spec: RunSpec, build_root: Path = Path("build"), corrupt: b
     records = Records(Layout(s.cond, s.part, s.est, SHIFT, lanes), work)
     records.remove()
     (work / SUMMARY).unlink(missing_ok=True)
-    words = seed_words(spec.seed, gpf.dp.draws() * lanes) if spec.load_seed else []
-    (work / SEED_FILE).write_text("".join(f"{w:016x}\n" for w in words) or "0\n")
-    init_w = sum(f.fmt.width for f in s.init)
-    init = one_beat(s.init, init_values(gpf, mu, sigma0, spec.init_particles))
-    (work / INIT_FILE).write_text(f"{init:0{-(-init_w // 4)}x}\n")
-    write_stimulus(work, [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs],
-                   sum(f.fmt.width for f in s.step))
+    words = write_inputs(work, gpf, spec, mu, sigma0, raw_inputs)
     limit = limit or step_limit(beats, spec.stall)
     seed = stall_seed(spec.seed)
     if log is not None:
@@ -189,17 +183,10 @@ def bare(cfg: Config, steps: int, particles: int, build_root: Path = Path("build
     binary = build(cfg, build_root)
     gpf = FixedGPF(cfg, particles=particles)
     spec = RunSpec(steps=steps, particles=particles, seed=seed)
-    s = streams(gpf)
     _, _, (mu, _, _, sigma0), raw_inputs = run_inputs(gpf, spec)
     work = binary.parent / "bare"
     work.mkdir(exist_ok=True)
-    words = seed_words(seed, gpf.dp.draws() * cfg.lanes)
-    (work / SEED_FILE).write_text("".join(f"{w:016x}\n" for w in words))
-    init_w = sum(f.fmt.width for f in s.init)
-    init = one_beat(s.init, init_values(gpf, mu, sigma0, None))
-    (work / INIT_FILE).write_text(f"{init:0{-(-init_w // 4)}x}\n")
-    write_stimulus(work, [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs],
-                   sum(f.fmt.width for f in s.step))
+    words = write_inputs(work, gpf, spec, mu, sigma0, raw_inputs)
     start = time.monotonic()
     done = subprocess.run([str(binary), f"+steps={steps}", f"+seed_words={len(words)}",
                            f"+limit={step_limit(particles // cfg.lanes, 0)}"], cwd=work,
@@ -207,6 +194,21 @@ def bare(cfg: Config, steps: int, particles: int, build_root: Path = Path("build
     seconds = time.monotonic() - start
     check_summary(read_summary(work), steps, particles // cfg.lanes, done.returncode, work)
     return seconds
+
+
+def write_inputs(work: Path, gpf: FixedGPF, spec: RunSpec, mu: np.ndarray, sigma0: np.ndarray,
+                 raw_inputs: list[dict]) -> list[int]:
+    """The files gpf_<app>_direct and its harness read: the seed words (returned), the init
+    beat, the step beats."""
+    s = streams(gpf)
+    words = seed_words(spec.seed, gpf.dp.draws() * gpf.cfg.lanes) if spec.load_seed else []
+    (work / SEED_FILE).write_text("".join(f"{w:016x}\n" for w in words) or "0\n")
+    init_w = sum(f.fmt.width for f in s.init)
+    init = one_beat(s.init, init_values(gpf, mu, sigma0, spec.init_particles))
+    (work / INIT_FILE).write_text(f"{init:0{-(-init_w // 4)}x}\n")
+    write_stimulus(work, [one_beat(s.step, step_values(gpf, r)) for r in raw_inputs],
+                   sum(f.fmt.width for f in s.step))
+    return words
 
 
 def read_summary(work: Path) -> dict[str, list[int] | str]:
