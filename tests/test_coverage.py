@@ -206,6 +206,21 @@ def test_coverage_filter_faults(config: str, scenario: str) -> None:
     check_run(result, res, 6, 128, lanes, tests=1)
 
 
+@pytest.mark.parametrize("particles", [pytest.param(4, marks=_marks("bot", 1), id="bot-lanes1")])
+def test_coverage_not_pd_recovers(particles: int) -> None:
+    """NOT_PD raised and cleared in bot: four particles for four states (a weighted covariance
+    of rank 3 at most, unless the weights spread it), so some steps regularise a pivot and the
+    next need none. The flags are the RTL's, each checked against the model's."""
+    from test_sim_filter import SHORT_OPT, check_run, filter_run
+
+    result, res = filter_run("bot", "verilator", 1, 6, particles, seed=2,
+                             scenario="bot_fixed_observer", testcase="test_filter",
+                             verilator_opt=SHORT_OPT)
+    check_run(result, res, 6, particles, 1, tests=1)
+    not_pd = ["not_pd" in flags for flags in res["flags"]]
+    assert any(a and not b for a, b in zip(not_pd, not_pd[1:], strict=False)), res["flags"]
+
+
 # Targets at the edges of the bot state's format (a CSV scenario each, from the generator of
 # bot_far_target): every component after sample_cond and after propagate at its top and its
 # bottom, a saturation that clears (a target at the edge moving inward), and particles whose
