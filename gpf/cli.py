@@ -447,7 +447,15 @@ def _make_command(target: str, args: argparse.Namespace, cfg, **variables: Any) 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from gpf.outputs import write_json
-    from gpf.run import RunArgs, plot, plot_paths, run_filter, run_warnings, summary_lines
+    from gpf.run import (
+        RunArgs,
+        SimulationError,
+        plot,
+        plot_paths,
+        run_filter,
+        run_warnings,
+        summary_lines,
+    )
 
     for name in ("steps", "particles"):
         _positive(f"--{name}", getattr(args, name))
@@ -488,7 +496,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_simulator(args.sim, args.waves)
     _build_dir(cfg)
     _check_gate_tools(args.gate)
-    res = run_filter(cfg, run_args)
+    try:
+        res = run_filter(cfg, run_args)
+    except SimulationError as exc:
+        print(f"gpf run: FAILED: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     if args.plot:
         res["plots"] = plot(res, cfg, Path(args.plot))
     res["warnings"] = run_warnings(res)   # saturation, a lost track: beside the verdict

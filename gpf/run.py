@@ -86,7 +86,7 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     sim = result["sim"]
     if not out.exists():
         if getattr(sim, "error", None):
-            raise RuntimeError(f"{sim.error} (see {log})")
+            raise SimulationError(f"{sim.error} (see {log})")
         raise RuntimeError(f"the testbench wrote no results ({sim.failed}/{sim.tests} tests "
                            f"failed): see {log}")
     res = json.loads(out.read_text())
@@ -100,6 +100,11 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
                particles_per_second=round(res["particles_checked"] / res["wall_seconds"], 1),
                waves=str(sim.waves) if sim.waves else None)
     return res
+
+
+class SimulationError(RuntimeError):
+    """A run that stopped on a check before its results (a hang, a protocol violation, a lost
+    beat): the design's failure, not the tool's."""
 
 
 @dataclass(frozen=True)

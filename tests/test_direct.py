@@ -61,3 +61,14 @@ def test_direct_refuses_what_it_cannot_run(capsys) -> None:
         assert gpf_main(["run", "--config", "bot", "--direct", "--json",
                          str(Path("build") / "unused.json"), *flags]) == 2
         assert "--direct" in capsys.readouterr().err
+
+
+def test_direct_failure_is_a_verdict(bot, monkeypatch, capsys) -> None:
+    """A run that stops on a check (here a hang) ends gpf run with FAILED, the reason and exit
+    status 1, not an internal error."""
+    monkeypatch.setattr(direct, "step_limit", lambda beats, stall: 40)
+    assert gpf_main(["run", "--config", "bot", "--set", "filter.lanes=1", "--steps", "2",
+                     "--particles", "64", "--direct", "--json",
+                     str(Path("build") / "hang.json")]) == 1
+    err = capsys.readouterr().err
+    assert "FAILED" in err and "no result for the limit of clocks" in err
