@@ -87,8 +87,9 @@ def run_filter(cfg: Config, args: RunArgs, progress: bool = True,
     if not out.exists():
         if getattr(sim, "error", None):
             raise SimulationError(f"{sim.error} (see {log})")
-        raise RuntimeError(f"the testbench wrote no results ({sim.failed}/{sim.tests} tests "
-                           f"failed): see {log}")
+        error = SimulationError if sim.failed else RuntimeError   # a check, or the tool
+        raise error(f"the testbench wrote no results ({sim.failed}/{sim.tests} tests failed): "
+                    f"see {log}")
     res = json.loads(out.read_text())
     wall = time.monotonic() - start
     from gpf.study.metrics import PRIMARY, metric
