@@ -18,9 +18,12 @@ pytestmark = [pytest.mark.sim, pytest.mark.slow, pytest.mark.xdist_group("gpf-bo
 
 @pytest.fixture(scope="module")
 def bot():
+    """bot at LANES 1, built at -O0: these runs are a few steps, the build is most of it."""
     cfg = load_config("configs/bot.toml", {"filter.lanes": 1})
-    direct.build(cfg)
-    return cfg
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(direct, "OPT_FAST", "-O0")
+        direct.build(cfg)
+        yield cfg
 
 
 def test_direct_run_is_bit_exact(bot) -> None:
