@@ -920,11 +920,8 @@ def _weight_block(cfg: Config, lane: dict[str, Any], lane_latency: int) -> dict[
     """A weight block's context: its lanes' (up to t), stage M and the exp lanes."""
     dp = datapath(cfg)
     lane_w = dp.n * dp.word + dp.weight.width + 1
-    latency = lane_latency + 1 + lane["exp_latency"]
     return {**lane, "lanes": cfg.lanes, "components": dp.n, "lane_latency": lane_latency,
-            "latency": latency,
-            # the particles' FIFO: every beat in flight, and room for one more
-            "xq_log2": math.ceil(math.log2(latency + 1)),
+            "latency": lane_latency + 1 + lane["exp_latency"],
             "out_width": cfg.lanes * lane_w + SHIFT_BITS}
 
 
@@ -1153,11 +1150,9 @@ MODULES: dict[str, Module] = {
                             propagate_bot_context, apps=("bot",)),
     "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
                             propagate_uav_context, apps=("uav",)),
-    "weight_bot": Module("weight_bot",
-                         ("gpf_fifo", "weight_bot_lane", "weight_bot"), weight_bot_context,
+    "weight_bot": Module("weight_bot", ("weight_bot_lane", "weight_bot"), weight_bot_context,
                          uses=("cordic_atan2", "exp"), apps=("bot",)),
-    "weight_uav": Module("weight_uav",
-                         ("gpf_fifo", "weight_uav_lane", "weight_uav"), weight_uav_context,
+    "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
                          uses=("exp",), apps=("uav",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
     "cholesky": Module("cholesky", ("cholesky_core", "cholesky"), cholesky_context, laned=False),

@@ -254,10 +254,9 @@ MUTANTS = {
     # z meets the CORDIC's angle one beat early: a step's first beat gets the last step's z
     "weight-bot-z-delay": ("weight_bot", "weight_bot.sv.j2", ".z      (zd_q[ZD*AW-1 -: AW]),",
                            ".z      (zd_q[(ZD-1)*AW-1 -: AW]),"),
-    # the particles' FIFO popped while the output stalls: the next beat gets a later particle
-    "weight-x-fifo-pop": ("weight_bot", "_weight.sv.j2",
-                          ".pop      (m_axis_tvalid && m_axis_tready),",
-                          ".pop      (m_axis_tvalid),"),
+    "weight-bot-x-delay": ("weight_bot", "weight_bot_lane.sv.j2",
+                           "assign x_out = xd_q[LAT*XW-1 -: XW];",
+                           "assign x_out = xd_q[(LAT-1)*XW-1 -: XW];"),
     "weight-uav-whiten-round": ("weight_uav", "_weight.sv.j2", "PW'(1 <<< (S1-1))",
                                 "PW'(1 <<< S1)"),
     # only the negative overflow flagged (the saturated value's sign is not observable: w = 0)
