@@ -37,6 +37,7 @@ from gpf.tb.gpf.filter import (
     RunSpec,
     Scorer,
     accuracy,
+    check_particles,
     expected_taps,
     init_values,
     one_beat,
@@ -116,11 +117,9 @@ def run(cfg: Config, spec: RunSpec, build_root: Path = Path("build"), corrupt: b
     counted in the result; anything else wrong raises DirectError. `log`: a text file for the
     build's and the simulation's output; `limit`: clocks a result may take (default
     filter.step_limit's)."""
+    check_particles(spec, cfg, DirectError)
     binary = build(cfg, build_root, log)
     began = time.monotonic()
-    if (spec.particles or 0) > cfg.particles:
-        raise DirectError(f"particles = {spec.particles}: more than the config's maximum "
-                          f"filter.particles = {cfg.particles}")
     gpf = FixedGPF(cfg, particles=spec.particles)
     s, lanes = streams(gpf), cfg.lanes
     beats = gpf.particles // lanes

@@ -26,6 +26,7 @@ import numpy as np
 from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, SimTimeoutError, with_timeout
 
+from gpf.config import Config
 from gpf.model.fixed import Format
 from gpf.model.fixed_gpf import FixedGPF, StepResult
 from gpf.model.float_gpf import FloatGPF
@@ -296,15 +297,20 @@ def step_limit(beats: int, stall: float) -> int:
     return 10 * (beats + 300) * (1 + int(10 * stall))
 
 
+def check_particles(spec: RunSpec, cfg: Config, error: type[Exception] = ValueError) -> None:
+    """A run asks for at most the config's filter.particles (the RTL's buffers' size)."""
+    if (spec.particles or 0) > cfg.particles:
+        raise error(f"particles = {spec.particles}: more than the config's maximum "
+                    f"filter.particles = {cfg.particles}")
+
+
 class FilterBench:
     """Drives gpf_<app> through a run and scores every stream against the model."""
 
     def __init__(self, dut: SimHandleBase, b: Bench, spec: RunSpec, corrupt: bool = False,
                  clock_running: bool = False):
         self.dut, self.b, self.spec = dut, b, spec
-        if (spec.particles or 0) > b.cfg.particles:
-            raise ValueError(f"particles = {spec.particles}: more than the config's maximum "
-                             f"filter.particles = {b.cfg.particles}")
+        check_particles(spec, b.cfg)
         self.gpf = FixedGPF(b.cfg, particles=spec.particles)
         self.s = streams(self.gpf)
         self.corrupt = corrupt
