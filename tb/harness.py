@@ -32,7 +32,8 @@ class Bench:
     manifest: dict[str, Any]
     seed: int
     long: bool
-    short: bool = False   # TEST_LEVEL=short: mutant runs, a fifth of the default beats
+    short: bool = False   # TEST_LEVEL=short (or quick): a fifth of the default beats
+    quick: bool = False   # TEST_LEVEL=quick (Icarus, mutants): a fiftieth of the random beats
 
     @functools.cached_property
     def dp(self) -> Datapath:
@@ -72,7 +73,8 @@ def bench() -> Bench:
     seed = int(os.environ["COCOTB_RANDOM_SEED"])
     logging.getLogger("tb").info("SEED=%d (replay: make sim MODULE=%s CONFIG=%s SEED=%d)",
                                  seed, os.environ.get("GPF_MODULE", "?"), cfg.name, seed)
-    return Bench(cfg, manifest, seed, level == "long", level == "short")
+    return Bench(cfg, manifest, seed, level == "long", level in ("short", "quick"),
+                 level == "quick")
 
 
 async def start(dut: SimHandleBase, reset_cycles: int = 4, hold_reset: bool = False) -> None:

@@ -138,10 +138,10 @@ Operands = Callable[[int, str], dict[str, np.ndarray]]  # (steps, tag) -> (steps
 
 def random_beat_count(b: Bench, stalls: tuple[float, float]) -> int:
     """The main stall shape gets the full count (10,000; 100,000 at TEST_LEVEL=long; 2,000 at
-    TEST_LEVEL=short), the others 2,000 (400 short)."""
+    TEST_LEVEL=short; 200 at quick), the others 2,000 (400 short, 100 quick)."""
     if stalls != (0.3, 0.3):
-        return 400 if b.short else 2_000
-    return 100_000 if b.long else 2_000 if b.short else 10_000
+        return 100 if b.quick else 400 if b.short else 2_000
+    return 100_000 if b.long else 200 if b.quick else 2_000 if b.short else 10_000
 
 
 async def check_random_beats(dut: SimHandleBase, block: StreamBlock, b: Bench,

@@ -49,13 +49,16 @@ def block_matrix(name: str) -> tuple[list, list]:
     """A block's (sim, config, lanes) runs: those of `make test` and the rest of the matrix
     (`make regress`). `make test`: Verilator runs the application's default config at LANES 1
     with every beat and waves, Icarus its odd config (odd words; bot's: ecp5, N = 1020) at
-    LANES 2 with waves and a fifth of the beats; a block of both applications with uav-only RTL
-    runs uav at LANES 2 on Verilator, and uav's ecp5 shape, where odd does not reach it, runs on
-    Verilator (both with a fifth of the beats: TEST_LEVEL=short). So every block runs on both
+    LANES 2 with waves, every directed test and a fiftieth of the random beats (TEST_LEVEL=quick:
+    Icarus is there for a second simulator's semantics, Verilator for the volume); a block of
+    both applications with uav-only RTL runs uav at LANES 2 on Verilator, and uav's ecp5 shape,
+    where odd does not reach it, runs on Verilator (both with a fifth of the beats:
+    TEST_LEVEL=short). So every block runs on both
     simulators (with waves), at both LANES, with odd words, in each application where its RTL
     differs. `make regress`: the rest of the matrix (the default config at LANES 2, the odd one
     at 1, the odd one on Verilator, the default on Icarus, uav on every block of both
-    applications) and every beat of the runs make test shortens on Verilator."""
+    applications; Icarus with a fifth of the beats) and every beat of the runs make test
+    shortens on Verilator."""
     block = BLOCKS[name]
     default, odd = APP_CONFIGS[block.apps[0]]
     two = 2 if block.laned else 1
@@ -90,14 +93,10 @@ def block_runs() -> list:
             if run in quick and sim == "verilator" and run != quick[0]:
                 runs.append(pytest.param(name, *run, "short", marks=marks, id=f"{ident}-short"))
             regress = run in rest or sim == "verilator" and run != quick[0]
-            runs.append(pytest.param(name, *run, "default", id=ident,
+            level = "default" if sim == "verilator" else "short" if regress else "quick"
+            runs.append(pytest.param(name, *run, level, id=ident,
                                      marks=[*marks, pytest.mark.regress] if regress else marks))
     return runs
-
-
-# Icarus runs a fifth of the beats (TEST_LEVEL=short) unless TEST_LEVEL says otherwise: it is
-# there for a second simulator's semantics, Verilator for the volume
-ICARUS_LEVEL = "short"
 
 
 @pytest.mark.parametrize("module,sim,config,lanes,level", block_runs())
@@ -108,7 +107,7 @@ def test_block(module: str, sim: str, config: str, lanes: int, level: str) -> No
     quick, _ = block_matrix(module)
     # waves: make test's run of the default config on Verilator and its run on Icarus
     waves = (sim, config, lanes) in (quick[0], quick[-1]) and waves_possible(sim)
-    level = os.environ.get("TEST_LEVEL") or (ICARUS_LEVEL if sim == "icarus" else level)
+    level = os.environ.get("TEST_LEVEL") or level
     result = run_sim(cfg, module, sim, waves=waves, seed=1000 + lanes,
                      log_file=Path("build") / cfg.name / f"{module}-{sim}.log",
                      verilator_opt="-O1" if module in RUN_BOUND else "-O0",
@@ -365,11 +364,12 @@ def test_mutated_template_fails(tmp_path: Path, mutant: str) -> None:
     templates = mutated_templates(tmp_path, mutant, template, old, new)
     # the module's application, or the config where the mutant is not equivalent
     config = MUTANT_CONFIG.get(mutant, "bot" if "bot" in BLOCKS[module].apps else "uav")
-    # TEST_LEVEL=short: each mutant was seen to fail at the default level too
+    # TEST_LEVEL=quick (a fiftieth of the random beats): each mutant was seen to fail at the
+    # short and default levels too
     result = run_mutant(mutant, load_config(f"configs/{config}.toml"), module, "icarus", seed=1,
                         template_dir=templates, build_root=tmp_path / "build",
                         log_file=tmp_path / "sim.log", all_modules=False,
-                        extra_env={"TEST_LEVEL": "short", "GPF_FAIL_FAST": "1"})
+                        extra_env={"TEST_LEVEL": "quick", "GPF_FAIL_FAST": "1"})
     if result is None:
         return
     assert result.tests > 0
