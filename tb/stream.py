@@ -372,20 +372,23 @@ class Sink(_Port):
     is always observed, and a clock it sleeps through never follows one with a beat held."""
 
     def __init__(self, prefix: SimHandleBase, name: str, stall: float, rng: random.Random,
-                 has_last: bool = True):
+                 has_last: bool = True, hold: int = 0):
         super().__init__(prefix, name, has_last)
         self.stall, self.rng = stall, rng
         self.beats: list[Beat] = []
         # for functional coverage (tb/coverage.py): clocks each beat was offered and not taken
         self.waits: Counter[int] = Counter()
         self._stalled = 0
-        self._ready = 0 if stall >= 1 else 1
+        # `hold`: the first beat offered waits this many clocks untaken (a consumer that comes
+        # late), then tready is random as above
+        self._hold = hold
+        self._ready = 0 if stall >= 1 or hold > 0 else 1
         self.tready.value = self._ready
         self._want, self._got = 0, Event()
         self.watch = self.tvalid
 
     def drive(self) -> None:
-        ready = 0 if self.rng.random() < self.stall else 1
+        ready = 0 if self._hold > 0 or self.rng.random() < self.stall else 1
         if ready != self._ready:
             self.tready.value = self._ready = ready
 
@@ -397,6 +400,7 @@ class Sink(_Port):
             beat = self._offered(ready is _1 or (ready is not _0 and ready == 1), cycle)
             if beat is None:
                 self._stalled += 1
+                self._hold = max(0, self._hold - 1)
             else:
                 self.waits[self._stalled] += 1
                 self._stalled = 0

@@ -221,6 +221,15 @@ def test_coverage_not_pd_recovers(particles: int) -> None:
     assert any(a and not b for a, b in zip(not_pd, not_pd[1:], strict=False)), res["flags"]
 
 
+@pytest.mark.parametrize("particles", [pytest.param(64, marks=_marks("bot", 1), id="bot-lanes1")])
+def test_coverage_result_held(particles: int) -> None:
+    """A result not taken for a whole step (ctrl's S_OUT wait): make test's
+    test_result_held_a_whole_step, run here too for the coverage union."""
+    from test_sim_filter import held_result_run
+
+    held_result_run(particles)
+
+
 # Targets at the edges of the bot state's format (a CSV scenario each, from the generator of
 # bot_far_target): every component after sample_cond and after propagate at its top and its
 # bottom, a saturation that clears (a target at the edge moving inward), and particles whose

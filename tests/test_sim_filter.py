@@ -49,14 +49,15 @@ def filter_run(config: str, sim: str, lanes: int, steps: int, particles: int, se
                build_root: Path = Path("build"), stall: float = 0.0,
                overrides: dict | None = None,
                verilator_opt: str | None = None, gate: bool = False,
-               ip: bool = False) -> tuple[object, dict]:
-    """`ip`: through gpf_<app>_axi, the filter as an IP block (AXI4-Lite, byte-wide streams)."""
+               ip: bool = False, spec: dict | None = None) -> tuple[object, dict]:
+    """`ip`: through gpf_<app>_axi, the filter as an IP block (AXI4-Lite, byte-wide streams);
+    `spec`: more of the run's RunSpec fields."""
     cfg = load_config(f"configs/{config}.toml", {"filter.lanes": lanes, **(overrides or {})})
     module = f"gpf_{cfg.app}_axi" if ip else f"gpf_{cfg.app}"
     out = (build_root / cfg.name / sim / module / "regression.json").resolve()
     out.unlink(missing_ok=True)
     spec = {"steps": steps, "particles": particles, "seed": seed, "out": str(out),
-            "scenario": scenario, "stall": stall}
+            "scenario": scenario, "stall": stall, **(spec or {})}
     # the faults trace too: they share the short run's build, and Verilator rebuilds the
     # whole model (20 s) when --trace comes or goes
     waves = config in ("bot", "uav") and lanes == 1 and waves_possible(sim) and steps < 10 \
@@ -247,6 +248,36 @@ def test_fault_flagged_and_survived(fault: str) -> None:
     assert [sorted(f) for f in res["flags"]] == [sorted(f) for f in flags], res["flags"]
     if scenario == "bot_bearing_glitch":   # the glitch step's best particles come one by one
         assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
+
+
+def held_result_run(particles: int = 64) -> None:
+    """bot's first result not taken for three steps' time: the second result waits in the
+    controller (its S_OUT wait) until the first is taken, and every value is still right (the
+    testbench checks that the hold did outlast the second step: FilterBench.check_held)."""
+    result, res = filter_run("bot", "verilator", 1, 3, particles, seed=3, testcase="test_filter",
+                             verilator_opt=SHORT_OPT,
+                             spec={"est_hold": 3 * (particles + 300), "harness": False})
+    check_run(result, res, 3, particles, 1, tests=1, stalled=True)
+
+
+@pytest.mark.xdist_group(build_group("bot", "verilator", 1))
+def test_result_held_a_whole_step() -> None:
+    held_result_run()
+
+
+@pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
+def test_result_held_catches_a_controller_that_does_not_wait(tmp_path: Path) -> None:
+    """The same hold against a ctrl whose S_OUT loads the output register without waiting for
+    the held result: the held beat changes under the testbench (an AXI4-Stream violation)."""
+    templates = mutated_templates(tmp_path, "ctrl-out-no-wait", "ctrl.sv.j2",
+                                  "assign out_load = state_q == S_OUT && !est_valid_q;",
+                                  "assign out_load = state_q == S_OUT;")
+    spec = {"steps": 3, "particles": 64, "seed": 3, "est_hold": 3 * (64 + 300), "harness": False}
+    result = run_mutant("ctrl-out-no-wait", load_config("configs/bot.toml"), "gpf_bot", "icarus",
+                        seed=3, testcase="test_filter", template_dir=templates,
+                        build_root=tmp_path / "build", log_file=tmp_path / "sim.log",
+                        extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
+    assert result is None or result.failed == 1, "a controller that does not wait passed"
 
 
 # (module, template, text, replacement, scenario, config overrides[, testcase]): blocks'

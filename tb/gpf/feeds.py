@@ -234,10 +234,11 @@ class StreamFeed:
     """The run's steps through cocotb's drivers and monitors (see the module's docstring)."""
 
     def __init__(self, dut: SimHandleBase, clk: SimHandleBase, layout: Layout, stall: float,
-                 rng: random.Random, est_last: bool):
+                 rng: random.Random, est_last: bool, est_hold: int = 0):
         self.dut, self.clk, self.layout = dut, clk, layout
         self.stall, self.rng, self.est_last = stall, rng, est_last
-        self.sinks = {k: Sink(dut, f"m_{k}", stall, rng, has_last=(k != "est" or est_last))
+        self.sinks = {k: Sink(dut, f"m_{k}", stall, rng, has_last=(k != "est" or est_last),
+                              hold=est_hold if k == "est" else 0)
                       for k in ("cond", "part", "est")}
 
     async def start(self, step_words: list[int], step_w: int) -> None:

@@ -78,6 +78,7 @@ class RunSpec:
     init_particles: int | None = None  # the N the init beat carries (default: particles)
     stall: float = 0.0                 # probability of a stall on every stream the tb drives
     harness: bool = True               # the steps through gpf_<app>_harness where it runs them
+    est_hold: int = 0                  # clocks the first result waits untaken (cocotb's feed)
     bare: bool = False                 # the harness alone: no model, nothing read or checked
     out: str | None = None             # results JSON
     progress: str | None = None        # a file rewritten after every step: "step mismatches"
@@ -426,6 +427,8 @@ class FilterBench:
         finally:
             model.stop()
         await feed.finish(steps, gpf.particles // lanes)
+        if self.spec.est_hold:
+            self.check_held(feed.beats, gpf.particles // lanes)
         if self.ip:
             self.check_framing(feed.beats)
         scorer = self.scorer
@@ -481,13 +484,23 @@ class FilterBench:
         """gpf_<app>_harness's streams where it runs them (RunSpec.harness, steps it holds),
         cocotb's drivers and monitors otherwise."""
         layout = Layout(self.s.cond, self.s.part, self.s.est, SHIFT, self.gpf.cfg.lanes)
-        if self.harness and self.spec.harness and steps <= HARNESS_STEPS_MAX:
+        if self.harness and self.spec.harness and not self.spec.est_hold \
+                and steps <= HARNESS_STEPS_MAX:
             seed = self.b.rng("harness-stalls").getrandbits(32)
             self.dut._log.info("harness stalls: probability %g, seed 0x%08x (from SEED=%d)",
                                self.spec.stall, seed, self.b.seed)
             return HarnessFeed(self.dut, layout, self.spec.stall, seed)
         return StreamFeed(self.dut, self.clk, layout, self.spec.stall, self.b.rng("streams"),
-                          est_last=bool(self.ip))
+                          est_last=bool(self.ip), est_hold=self.spec.est_hold)
+
+    @staticmethod
+    def check_held(mons: dict[str, list], beats: int) -> None:
+        """RunSpec.est_hold: the first result was still untaken when the second step's last
+        particle left, so the controller held the second result back (its S_OUT wait)."""
+        assert len(mons["part"]) >= 2 * beats, "est_hold needs two steps"
+        taken, second = mons["est"][0].cycle, mons["part"][2 * beats - 1].cycle
+        assert taken > second, (f"the first result was taken at clock {taken}, before the second "
+                                f"step's last particle at {second}: est_hold too short")
 
     def check_framing(self, mons: dict[str, list]) -> None:
         """gpf_<app>_axi: every m_est beat a packet (TLAST), every stream's padding zero."""
