@@ -130,7 +130,7 @@ def run_direct(cfg: Config, spec: dict[str, Any], build_root: Path, log: Path) -
     with log.open("w") as f:
         try:
             res = direct.run(cfg, run_spec, build_root, log=f)
-        except AssertionError as exc:   # DirectError, or a beat the scoring refused (tlast)
+        except direct.DirectError as exc:
             f.write(f"FAILED: {exc}\n")
             return DirectResult(False, 1, error=str(exc))
         write_result(res, run_spec.out)

@@ -256,7 +256,7 @@ def held_result_run(particles: int = 64) -> None:
     testbench checks that the hold did outlast the second step: FilterBench.check_held)."""
     result, res = filter_run("bot", "verilator", 1, 3, particles, seed=3, testcase="test_filter",
                              verilator_opt=SHORT_OPT,
-                             spec={"est_hold": 3 * (particles + 300), "harness": False})
+                             spec={"est_hold": 3 * (particles + 300)})
     check_run(result, res, 3, particles, 1, tests=1, stalled=True)
 
 
@@ -272,7 +272,7 @@ def test_result_held_catches_a_controller_that_does_not_wait(tmp_path: Path) -> 
     templates = mutated_templates(tmp_path, "ctrl-out-no-wait", "ctrl.sv.j2",
                                   "assign out_load = state_q == S_OUT && !est_valid_q;",
                                   "assign out_load = state_q == S_OUT;")
-    spec = {"steps": 3, "particles": 64, "seed": 3, "est_hold": 3 * (64 + 300), "harness": False}
+    spec = {"steps": 3, "particles": 64, "seed": 3, "est_hold": 3 * (64 + 300)}
     result = run_mutant("ctrl-out-no-wait", load_config("configs/bot.toml"), "gpf_bot", "icarus",
                         seed=3, testcase="test_filter", template_dir=templates,
                         build_root=tmp_path / "build", log_file=tmp_path / "sim.log",

@@ -160,7 +160,10 @@ def run(cfg: Config, spec: RunSpec, build_root: Path = Path("build"), corrupt: b
             if not opened:
                 records.open()
                 opened = True
-            scorer.check_step(k, records.read(k, beats), exp, beats, steps)
+            try:
+                scorer.check_step(k, records.read(k, beats), exp, beats, steps)
+            except AssertionError as exc:   # a beat the scoring refuses (a wrong tlast, ...)
+                raise DirectError(str(exc)) from exc
         sim.wait(timeout=60)
     finally:
         if sim.poll() is None:
