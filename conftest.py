@@ -33,9 +33,10 @@ def pytest_addoption(parser) -> None:
                      help="split the selected tests into this many shards (make regress SHARDS=)")
     parser.addoption("--shard", type=int, default=0,
                      help="run shard i of --shards, 0-based (make regress SHARD=)")
-    parser.addoption("--coverage-report", action="store_true",
+    parser.addoption("--coverage-report", nargs="?", const="all", choices=("all", "code"),
                      help="at the end, merge build/coverage/ and report it (gpf coverage); "
-                     "with one shard, a hole without a reason fails the session")
+                     "with one shard, a hole without a reason fails the session (=code: an "
+                     "unexplained line only, as gpf coverage --judge code)")
 
 
 # The stall campaign comes in pieces of its particle budget, two a shard (pytest -n 2: both of a
@@ -123,6 +124,6 @@ def pytest_sessionfinish(session, exitstatus) -> None:
     from gpf.cli import main as gpf_main
 
     print("\n", flush=True)
-    code = gpf_main(["coverage"])
+    code = gpf_main(["coverage", "--judge", config.getoption("coverage_report")])
     if code and config.getoption("shards") == 1 and session.exitstatus == 0:
         session.exitstatus = code

@@ -106,6 +106,9 @@ def test_gpf_coverage_fails_on_a_hole_without_reason(tmp_path: Path, monkeypatch
     assert "hole without a reason: selftest_cli.bot.lanes:lanes 1" in out
     report = (tmp_path / "cov" / "report.md").read_text()
     assert "## Holes without a reason" in report
+    # make coverage-runs judges the code lines only: the same holes printed, not failed
+    assert gpf_main([*args, "--judge", "code"]) == 0
+    assert "hole without a reason: selftest_cli.bot.lanes:lanes 1" in capsys.readouterr().out
 
 
 def dat_point(file: Path, line: int, kind: str, comment: str, inst: str) -> str:
@@ -168,9 +171,11 @@ FILTER_TESTS = ("test_filter", "test_stalls", "test_reset_mid_step",
                 "test_particle_count_out_of_range")
 # (config, lanes, particles, steps): N / LANES odd at each LANES, and with the
 # out-of-range test N = LANES and N = the maximum at LANES 2 and 4 too; 8 result beats for
-# m_est's stalls (test_stalls stalls it half the clocks)
+# m_est's stalls (test_stalls stalls it half the clocks); the 24-bit uav config at the LANES its
+# fault scenario runs, so its stall arms and init clamp are driven too
 COVERAGE_RUNS = [("bot", 1, 33, 8), ("bot", 2, 34, 8), ("bot", 4, 68, 8),
-                 ("uav", 1, 33, 8), ("uav", 2, 34, 8), ("uav", 4, 68, 8)]
+                 ("uav", 1, 33, 8), ("uav", 2, 34, 8), ("uav", 4, 68, 8),
+                 ("uav_seed002", 2, 34, 8)]
 # whole-filter scenarios for the flags, the weights' collapse and the saturations
 COVERAGE_FAULTS = [("bot", "bot_outlier"), ("bot", "bot_bearing_glitch"),
                    ("bot", "bot_far_target"), ("uav_seed002", "uav_gps_glitch")]

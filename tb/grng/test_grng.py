@@ -12,7 +12,7 @@ from cocotb.handle import SimHandleBase
 from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge
 
 from gpf.model.fixed import shift_round
-from gpf.model.grng import COMPONENTS, GrngModel
+from gpf.model.grng import COMPONENTS, GrngModel, GrngStream
 from gpf.tb import coverage
 from gpf.tb.harness import Bench, bench, start
 from gpf.tb.scoreboard import Field, Scoreboard, unpack
@@ -175,6 +175,67 @@ async def test_reseed_mid_stream(dut: SimHandleBase) -> None:
                unpack(new, sb.fields, b.cfg.lanes), first_beat=len(old))
     dut._log.info("%s (%d before the load, %d after)", sb.summary(), len(old), len(new))
     sb.assert_clean()
+
+
+# the tail bands a seed search looks for: |z| in [4, 5) and beyond 5, each sign (a fixed seed
+# draws there once in 3.2e-5 and 2.9e-7 samples a side: random runs miss them)
+TAIL_BANDS = {"+4-5": (4.0, 5.0), "-4-5": (-5.0, -4.0), "+5+": (5.0, np.inf),
+              "-5+": (-np.inf, -5.0)}
+TAIL_DRAWS = 2_000           # per lane after each seed load
+TAIL_SEARCH = 40_000         # seeds tried, 512 at a time, before the search gives up
+
+
+def in_band(z: np.ndarray, band: str) -> np.ndarray:
+    """Samples in a tail band, its edges as tb/coverage.py's sigma bands (floor of |z|)."""
+    lo, hi = TAIL_BANDS[band]
+    return (z >= lo) & (z < hi) if lo >= 0 else (z > lo) & (z <= hi)
+
+
+def tail_seeds(model: GrngModel, noise, first: int) -> dict[str, int]:
+    """The first seed from `first` on whose first TAIL_DRAWS samples (any lane) fall in each
+    tail band, found with the bit-exact model."""
+    found: dict[str, int] = {}
+    for chunk in range(first, first + TAIL_SEARCH, 512):
+        z = noise.to_real(GrngStream(model, list(range(chunk, chunk + 512))).next(TAIL_DRAWS))
+        for band in TAIL_BANDS:
+            inside = in_band(z, band).any(axis=(1, 2))
+            if band not in found and inside.any():
+                found[band] = chunk + int(np.argmax(inside))
+        if len(found) == len(TAIL_BANDS):
+            return found
+    missing = sorted(set(TAIL_BANDS) - set(found))
+    raise AssertionError(f"no seed in {first}..{first + TAIL_SEARCH} draws in {missing}")
+
+
+@cocotb.test()
+async def test_tail_bands(dut: SimHandleBase) -> None:
+    """Seeds whose first samples reach |z| in [4, 5) and >= 5 on each side (searched with the
+    model from the run's seed): each loaded, its samples checked bit-exactly, and the tail
+    values must come out of the RTL."""
+    b = bench()
+    model = GrngModel(b.cfg)
+    seeds = tail_seeds(model, b.cfg.noise, b.seed)
+    await idle_inputs(dut)
+    seed_mon = StreamMonitor(dut.clk, dut, "s_seed")
+    await start(dut)
+    sb, reached = scoreboard(b), set()
+    for band, seed in sorted(seeds.items(), key=lambda kv: kv[1]):
+        if band in reached:
+            continue
+        loaded = len(seed_mon.beats)
+        await load_seed(dut, model.seed_words(seed), b.rng(f"tail-{seed}"))
+        await ClockCycles(dut.clk, 2)
+        seen = [beat.data for beat in seed_mon.beats[loaded:]]
+        mon = StreamMonitor(dut.clk, dut, "m_axis")
+        words = await collect(mon, TAIL_DRAWS)
+        mon.stop()
+        check(sb, b, model.normals_raw_from_words(seen, TAIL_DRAWS), words)
+        z = b.cfg.noise.to_real(unpack(words, sb.fields, b.cfg.lanes)["z"])
+        reached |= {k for k in TAIL_BANDS if in_band(z, k).any()}
+        dut._log.info("seed %d (for %s): %s", seed, band, sb.summary())
+    seed_mon.stop()
+    sb.assert_clean()
+    assert reached == set(TAIL_BANDS), f"the RTL's samples reached only {sorted(reached)}"
 
 
 class TruncatingModel(GrngModel):
