@@ -844,9 +844,10 @@ def build_parser() -> Parser:
     p.add_argument("--seed", type=int, default=1, help="the sample's seed (default 1)")
     p.add_argument("--shards", type=int, default=1, help="split the selection in k shards")
     p.add_argument("--shard", type=int, default=0, help="run shard i (from 0) of --shards")
-    p.add_argument("--level", choices=["short", "default"], default="short",
-                   help="the testbenches' TEST_LEVEL (default short: a fifth of the beats; "
-                   "a survivor of short runs again at default)")
+    p.add_argument("--level", choices=["quick", "short", "default"], default="quick",
+                   help="the block testbenches' first TEST_LEVEL (default quick: a fiftieth of "
+                   "the random beats); a survivor runs again at each level after it, up to "
+                   "default (a whole filter's mutants run at short)")
     p.add_argument("--out", default="build/mutants", help="report folder (default "
                    "build/mutants)")
     p.add_argument("--list", action="store_true", help="list the selected mutants, run none")

@@ -3,7 +3,8 @@
 Each mutant belongs to one target: the first (block, config) whose generated RTL holds the
 mutated text, or a whole filter (gpf_bot, gpf_uav) for the tops' own templates. It runs on
 Icarus against that block's own cocotb testbench (the whole filter's short `gpf run` for the
-tops), each in a child process with a wall-clock limit. Verdicts: killed (a test failed, or an
+tops), each in a child process with a wall-clock limit, at rising test levels while it
+survives, then against each other target whose RTL holds the text while it still survives. Verdicts: killed (a test failed, or an
 RTL check stopped the simulator with $fatal), survived, stillborn (the template did not render
 or the RTL did not compile: not scored) and hung (the wall clock ran out before the testbench's
 own timeouts saw anything: scored as a survivor).
@@ -101,10 +102,12 @@ def _marker(k: int) -> str:
     return f"/*@MUTANT{k}@*/"
 
 
-def assign_targets(mutants: list[Mutant], work: Path) -> dict[str, Target | None]:
-    """Each mutant's target: the first target owning its template whose RTL renders the
-    mutated text (found by rendering the template once per target with a comment marking
-    every site); None where no config reaches it."""
+def assign_targets(mutants: list[Mutant], work: Path) -> dict[str, list[Target]]:
+    """Each mutant's targets: every target owning its template whose RTL renders the mutated
+    text, in targets()' order (found by rendering the template once per target with a comment
+    marking every site); empty where no config reaches it. The first is the mutant's own (its
+    row in the scores); a survivor there runs against the others (a shared template's line
+    may matter in another config only: an N = 3 Cholesky core, a signed difference)."""
     by_template: dict[str, list[Mutant]] = {}
     for mu in mutants:
         by_template.setdefault(mu.template, []).append(mu)
@@ -112,7 +115,7 @@ def assign_targets(mutants: list[Mutant], work: Path) -> dict[str, Target | None
     for t in targets():
         for name in owned_templates(t.module):
             owners.setdefault(name, []).append(t)
-    found: dict[str, Target | None] = {mu.id: None for mu in mutants}
+    found: dict[str, list[Target]] = {mu.id: [] for mu in mutants}
     for name, group in by_template.items():
         offsets = sorted({mu.offset for mu in group})
         text = (TEMPLATE_DIR / name).read_text()
@@ -122,17 +125,13 @@ def assign_targets(mutants: list[Mutant], work: Path) -> dict[str, Target | None
         shutil.rmtree(marked, ignore_errors=True)
         shutil.copytree(TEMPLATE_DIR, marked)
         (marked / name).write_text(text)
-        open_sites = set(range(len(offsets)))
         for t in owners.get(name, []):
-            if not open_sites:
-                break
             rendered = _render(t, marked, work / "render")
-            for k in sorted(open_sites):
+            for k, offset in enumerate(offsets):
                 if _marker(k) in rendered:
-                    open_sites.discard(k)
                     for mu in group:
-                        if mu.offset == offsets[k]:
-                            found[mu.id] = t
+                        if mu.offset == offset:
+                            found[mu.id].append(t)
         shutil.rmtree(marked)
     return found
 
@@ -257,11 +256,11 @@ def equivalents(path: Path = EQUIVALENT_FILE) -> dict[str, dict]:
     return tomllib.loads(path.read_text()) if path.exists() else {}
 
 
-def select(mutants: list[Mutant], assigned: dict[str, Target | None], module: str | None,
+def select(mutants: list[Mutant], assigned: dict[str, list[Target]], module: str | None,
            ids: list[str] | None, sample: int | None, seed: int, shards: int,
            shard: int) -> list[Mutant]:
-    chosen = [mu for mu in mutants if assigned[mu.id] is not None
-              and (module is None or assigned[mu.id].module == module)
+    chosen = [mu for mu in mutants if assigned[mu.id]
+              and (module is None or assigned[mu.id][0].module == module)
               and (not ids or mu.id in ids)]
     if sample is not None and sample < len(chosen):
         order = {mu.id: i for i, mu in enumerate(mutants)}
@@ -277,31 +276,71 @@ def unified_diff(mu: Mutant) -> str:
                                         f"a/{mu.template}", f"b/{mu.template}", n=1))
 
 
-def run_campaign(mutants: list[Mutant], assigned: dict[str, Target | None], work: Path,
-                 level: str = "short", log=print, on_verdict=None) -> Campaign:
+# a block mutant runs at the campaign's level and, while it survives, at each level after it
+# (tb/harness.py: quick a fiftieth of the random beats, short a fifth, default all); the beats
+# relative to the level before set the hang limit. A top's mutants run the whole filter's
+# escalation (FILTER_ESCALATION) at short, which has no quick level of its own.
+LEVELS = ("quick", "short", "default")
+LEVEL_BEATS = {"short": 10, "default": 5}
+
+
+def first_level(t: Target, level: str) -> str:
+    return "short" if t.is_filter and level == "quick" else level
+
+
+def escalation(t: Target, level: str) -> tuple[str, ...]:
+    return () if t.is_filter else LEVELS[LEVELS.index(level) + 1:]
+
+
+def run_campaign(mutants: list[Mutant], assigned: dict[str, list[Target]], work: Path,
+                 level: str = "quick", log=print, on_verdict=None) -> Campaign:
     camp = Campaign()
     templates = work / "templates"
     shutil.rmtree(templates, ignore_errors=True)
     shutil.copytree(TEMPLATE_DIR, templates)
-    for t in sorted({assigned[mu.id] for mu in mutants}, key=lambda t: t.name):
-        status, detail, seconds = simulate(t, templates, work, level, limit=600)
-        if status != "survived":
-            raise RuntimeError(f"the unmutated {t.name} does not pass ({status}: {detail}); "
-                               f"see {work / 'sim.log'}")
-        camp.baseline[t.name] = round(seconds, 1)
-        log(f"baseline {t.name}: passed in {seconds:.1f} s")
+
+    def baseline(t: Target) -> float:
+        """The unmutated target's time at the first level (run once; templates unmutated)."""
+        if t.name not in camp.baseline:
+            status, detail, seconds = simulate(t, templates, work, first_level(t, level), 600)
+            if status != "survived":
+                raise RuntimeError(f"the unmutated {t.name} does not pass ({status}: "
+                                   f"{detail}); see {work / 'sim.log'}")
+            camp.baseline[t.name] = round(seconds, 1)
+            log(f"baseline {t.name}: passed in {seconds:.1f} s")
+        return camp.baseline[t.name]
+
+    def run(t: Target) -> tuple[str, str, float]:
+        """One target, its levels while the mutant survives."""
+        # the testbenches' own timeouts allow several times a run's length
+        limit = max(60.0, 20 * camp.baseline[t.name])
+        status, detail, seconds = simulate(t, templates, work, first_level(t, level), limit)
+        for more_level in escalation(t, level):
+            if status != "survived":
+                break
+            # fewer beats let it through: the next level (the testbench's own default run
+            # last) decides; the hang limit scaled by the beats, generously
+            limit *= LEVEL_BEATS[more_level]
+            status, detail, more = simulate(t, templates, work, more_level, limit)
+            detail += f" (at TEST_LEVEL={more_level}, after surviving {level})"
+            seconds += more
+        return status, detail, seconds
+
+    for t in sorted({assigned[mu.id][0] for mu in mutants}, key=lambda t: t.name):
+        baseline(t)
     for n, mu in enumerate(mutants, 1):
-        t = assigned[mu.id]
+        t, others = assigned[mu.id][0], assigned[mu.id][1:]
         original = (TEMPLATE_DIR / mu.template).read_text()
+        for other in others:   # the baselines a survivor may need, before the mutant goes in
+            baseline(other)
         (templates / mu.template).write_text(mu.apply(original))
         try:
-            # the testbenches' own timeouts allow several times a run's length
-            limit = max(60.0, 20 * camp.baseline[t.name])
-            status, detail, seconds = simulate(t, templates, work, level, limit)
-            if status == "survived" and level == "short" and not t.is_filter:
-                # a fifth of the beats let it through: the testbench's own default run decides
-                status, detail, more = simulate(t, templates, work, "default", 5 * limit)
-                detail += " (at TEST_LEVEL=default, after surviving short)"
+            status, detail, seconds = run(t)
+            for other in others:
+                if status != "survived":
+                    break
+                status, detail, more = run(other)
+                detail = f"{other.name}: {detail} (after surviving {t.name})"
                 seconds += more
         finally:
             (templates / mu.template).write_text(original)
@@ -392,7 +431,7 @@ def write_report(camp: Campaign, out: Path, command: str) -> tuple[Path, Path]:
 
 def campaign(module: str | None = None, ids: list[str] | None = None,
              sample: int | None = None, seed: int = 1, shards: int = 1, shard: int = 0,
-             level: str = "short", out: Path = Path("build/mutants"), list_only: bool = False,
+             level: str = "quick", out: Path = Path("build/mutants"), list_only: bool = False,
              command: str = "gpf mutants", log=print) -> Path | None:
     """Scan, assign, select, run and report; with `list_only`, print the selection only."""
     work = out / "work"
@@ -408,16 +447,17 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
     chosen = select(mutants, assigned, module, ids, sample, seed, shards, shard)
     if list_only:
         for mu in chosen:
-            log(f"{mu.id}\t{assigned[mu.id].name}\t{mu.before!r} -> {mu.after!r}")
+            log(f"{mu.id}\t{' '.join(t.name for t in assigned[mu.id])}\t"
+                f"{mu.before!r} -> {mu.after!r}")
         return None
-    in_scope = [mu for mu in mutants if assigned[mu.id] is not None
-                and (module is None or assigned[mu.id].module == module)]
-    log(f"gpf mutants: {len(chosen)} of {len(in_scope)} mutants "
-        f"({sum(a is None for a in assigned.values())} sites of {len(mutants)} rendered in no "
-        f"config), level {level}, {SIM}")
+    in_scope = [mu for mu in mutants if assigned[mu.id]
+                and (module is None or assigned[mu.id][0].module == module)]
+    unreached = sum(not a for a in assigned.values())
+    log(f"gpf mutants: {len(chosen)} of {len(in_scope)} mutants ({unreached} sites of "
+        f"{len(mutants)} rendered in no config), level {level}, {SIM}")
     camp = run_campaign(chosen, assigned, work, level, log)
     camp.total = len(in_scope)
-    camp.unreached = sum(a is None for a in assigned.values())
+    camp.unreached = unreached
     json_path, md_path = write_report(camp, out, command)
     shutil.rmtree(work, ignore_errors=True)
     r = scores(camp)["all"]
@@ -428,7 +468,7 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
     return md_path
 
 
-def rerun_survivors(report: Path, level: str = "short", log=print,
+def rerun_survivors(report: Path, level: str = "quick", log=print,
                     mark_only: bool = False) -> Path:
     """Run a report's survivors (and hung mutants) that the list of equivalents does not
     explain again, with the testbenches as they are now, and write the report back with their

@@ -97,9 +97,14 @@ def test_equivalent_entries_name_existing_mutants() -> None:
 
 @pytest.mark.sim
 @pytest.mark.skipif(icarus_missing() is not None, reason=icarus_missing() or "")
-def test_a_known_mutant_is_killed_and_a_listed_equivalent_is_marked(tmp_path: Path) -> None:
+def test_a_known_mutant_is_killed_and_a_listed_equivalent_is_marked(tmp_path: Path,
+                                                                    monkeypatch) -> None:
+    from gpf import mutants
+
     killed = "sqrt_lane.sv.j2:42:31:compare"      # a root digit's >= made >
     equivalent = "sqrt.sv.j2:40:32:arith"        # in equivalent.toml
+    # the bot config only (the equivalent would run against each of the four sqrt configs)
+    monkeypatch.setattr(mutants, "APP_CONFIGS", {"bot": ("bot",), "uav": ()})
     report = campaign(ids=[killed, equivalent], out=tmp_path, log=lambda *_: None)
     import json
 
@@ -110,3 +115,35 @@ def test_a_known_mutant_is_killed_and_a_listed_equivalent_is_marked(tmp_path: Pa
     assert verdicts[equivalent]["equivalent"] == equivalents()[equivalent]["reason"]
     assert data["scores"]["all"]["score_pct"] == 100.0
     assert "Equivalent survivors (1)" in report.read_text()
+
+
+def test_a_survivor_runs_against_the_other_targets_rendering_it(tmp_path: Path,
+                                                                monkeypatch) -> None:
+    """run_campaign's order, with the simulator replaced: a mutant surviving its own target at
+    every level runs against the next target that renders it, whose kill is the verdict (the
+    next target's baseline run first, unmutated); a mutant killed at once runs nowhere else."""
+    from gpf import mutants as m
+
+    mu_a, mu_b = scan_dir(TEMPLATE_DIR, ["sqrt.sv.j2"])[:2]
+    original = (TEMPLATE_DIR / "sqrt.sv.j2").read_text()
+    applied = {original: "-", mu_a.apply(original): "a", mu_b.apply(original): "b"}
+    first, second = m.Target("sqrt", "bot", 2), m.Target("sqrt", "uav", 2)
+    calls = []
+
+    def simulate(t, templates, work, level, limit):
+        which = applied[(templates / "sqrt.sv.j2").read_text()]
+        calls.append((t.config, level, which))
+        if which == "b" or (which == "a" and t == second):
+            return "killed", "1 of 8 tests failed", 1.0
+        return "survived", "8 tests passed", 1.0
+
+    monkeypatch.setattr(m, "simulate", simulate)
+    camp = m.run_campaign([mu_a, mu_b], {mu_a.id: [first, second], mu_b.id: [first, second]},
+                          tmp_path, "quick", log=lambda *_: None)
+    a, b = camp.verdicts
+    assert (a.status, a.target) == ("killed", first.name)
+    assert a.detail == f"{second.name}: 1 of 8 tests failed (after surviving {first.name})"
+    assert (b.status, b.detail) == ("killed", "1 of 8 tests failed")
+    assert calls == [("bot", "quick", "-"), ("uav", "quick", "-"),       # the baselines
+                     ("bot", "quick", "a"), ("bot", "short", "a"), ("bot", "default", "a"),
+                     ("uav", "quick", "a"), ("bot", "quick", "b")]
