@@ -41,12 +41,14 @@ EQUIVALENT_FILE = Path(__file__).resolve().parent.parent / "tests/data/mutants/e
 APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
 # the whole filter's runs for a top's mutant, each only if it survived the one before: a short
 # run (as tests/test_sim_filter.py's mutants), then runs that raise the flags the first never
-# does (every step below the ESS threshold, an outlier measurement, a target out of range),
-# two lanes (a lane's indexing is the same at LANES 1) and every stream stalled half the
-# clocks (the handshakes): (scenario, config overrides, stall)
+# does (every step below the ESS threshold, an outlier measurement, a target out of range, a
+# bearing glitch whose weights collapse onto one particle: at N = 32 its ESS rounds to 1.0,
+# exactly the LOW_ESS threshold N/32), two lanes (a lane's indexing is the same at LANES 1)
+# and every stream stalled half the clocks (the handshakes): (scenario, config overrides, stall)
 FILTER_RUN = {"steps": 5, "particles": 32}
 FILTER_ESCALATION = ((None, {}, 0.0), (None, {"filter.ess_min": 1}, 0.0),
                      ("bot_outlier", {}, 0.0), ("bot_far_target", {}, 0.0),
+                     ("bot_bearing_glitch", {}, 0.0),
                      (None, {"filter.lanes": 2}, 0.0), (None, {}, 0.5))
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
