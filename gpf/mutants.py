@@ -4,7 +4,8 @@ Each mutant belongs to one target: the first (block, config) whose generated RTL
 mutated text, or a whole filter (gpf_bot, gpf_uav) for the tops' own templates. It runs on
 Icarus against that block's own cocotb testbench (the whole filter's short `gpf run` for the
 tops), each in a child process with a wall-clock limit, at rising test levels while it
-survives, then against each other target whose RTL holds the text while it still survives. Verdicts: killed (a test failed, or an
+survives, then against each other target whose RTL holds the text while it still survives.
+Verdicts: killed (a test failed, or an
 RTL check stopped the simulator with $fatal), survived, stillborn (the template did not render
 or the RTL did not compile: not scored) and hung (the wall clock ran out before the testbench's
 own timeouts saw anything: scored as a survivor).
@@ -44,12 +45,15 @@ APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
 # does (every step below the ESS threshold, an outlier measurement, a target out of range, a
 # bearing glitch whose weights collapse onto one particle: at N = 32 its ESS rounds to 1.0,
 # exactly the LOW_ESS threshold N/32), two lanes (a lane's indexing is the same at LANES 1)
-# and every stream stalled half the clocks (the handshakes): (scenario, config overrides, stall)
+# and every stream stalled half the clocks (the handshakes): (scenario, config overrides,
+# stall, particles). The far target runs 512 particles, more than the pipeline holds (about
+# 240 clocks from ctrl to the moments), so its saturations are flagged while particles still
+# stream, not only after the last has left ctrl.
 FILTER_RUN = {"steps": 5, "particles": 32}
-FILTER_ESCALATION = ((None, {}, 0.0), (None, {"filter.ess_min": 1}, 0.0),
-                     ("bot_outlier", {}, 0.0), ("bot_far_target", {}, 0.0),
-                     ("bot_bearing_glitch", {}, 0.0),
-                     (None, {"filter.lanes": 2}, 0.0), (None, {}, 0.5))
+FILTER_ESCALATION = ((None, {}, 0.0, 32), (None, {"filter.ess_min": 1}, 0.0, 32),
+                     ("bot_outlier", {}, 0.0, 32), ("bot_far_target", {}, 0.0, 512),
+                     ("bot_bearing_glitch", {}, 0.0, 32),
+                     (None, {"filter.lanes": 2}, 0.0, 32), (None, {}, 0.5, 32))
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
 
@@ -173,10 +177,10 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
     try:
         if t.is_filter:
             runs = [r for r in FILTER_ESCALATION if r[0] is None or r[0].startswith(cfg.app)]
-            for scenario, overrides, stall in runs:
+            for scenario, overrides, stall, particles in runs:
                 run_cfg = load_config(config_path(t.config), {"filter.lanes": t.lanes,
                                                               **overrides})
-                res = run_filter(run_cfg, RunArgs(FILTER_RUN["steps"], FILTER_RUN["particles"],
+                res = run_filter(run_cfg, RunArgs(FILTER_RUN["steps"], particles,
                                                   1, scenario, SIM, False, stall=stall),
                                  progress=False, build_root=build_root, template_dir=template_dir)
                 if not res["passed"]:
