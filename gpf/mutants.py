@@ -44,16 +44,37 @@ APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
 # run (as tests/test_sim_filter.py's mutants), then runs that raise the flags the first never
 # does (every step below the ESS threshold, an outlier measurement, a target out of range, a
 # bearing glitch whose weights collapse onto one particle: at N = 32 its ESS rounds to 1.0,
-# exactly the LOW_ESS threshold N/32), two lanes (a lane's indexing is the same at LANES 1)
-# and every stream stalled half the clocks (the handshakes): (scenario, config overrides,
-# stall, particles). The far target runs 512 particles, more than the pipeline holds (about
-# 240 clocks from ctrl to the moments), so its saturations are flagged while particles still
-# stream, not only after the last has left ctrl.
+# exactly the LOW_ESS threshold N/32; a target near the rail, a few particles saturating),
+# two lanes (a lane's indexing is the same at LANES 1) and every stream stalled half the
+# clocks (the handshakes): (scenario, config overrides, stall, particles). The far target and
+# the rail run 512 particles, more than the pipeline holds, so saturations are flagged while
+# particles still stream, not only after the last has left ctrl.
 FILTER_RUN = {"steps": 5, "particles": 32}
 FILTER_ESCALATION = ((None, {}, 0.0, 32), (None, {"filter.ess_min": 1}, 0.0, 32),
                      ("bot_outlier", {}, 0.0, 32), ("bot_far_target", {}, 0.0, 512),
-                     ("bot_bearing_glitch", {}, 0.0, 32),
+                     ("bot_bearing_glitch", {}, 0.0, 32), ("bot_near_rail", {}, 0.0, 512),
                      (None, {"filter.lanes": 2}, 0.0, 32), (None, {}, 0.5, 32))
+
+
+def bot_near_rail(cfg, path: Path) -> str:
+    """A CSV scenario (written to `path`) whose cloud sits 0.25 m inside x's top: a few of each
+    step's particles saturate, spread through the step, so in some steps only particles that
+    leave ctrl early do (the far target saturates every one). Its second step at 512 particles
+    (the model's draws of seed 1): 21 saturate among the first 464, none among the last 48."""
+    import numpy as np
+
+    from gpf.model.scenarios import _bot, write_csv
+
+    steps, edge = FILTER_RUN["steps"], float(cfg.formats["state"].max_real)
+    observer = np.zeros((steps + 1, 2))
+    observer[0] = np.nan
+    write_csv(_bot(cfg, steps, 1, observer, "bot_near_rail",
+                   np.array([edge - 0.25, 0.0, 1.0, 0.0])), path)
+    return str(path)
+
+
+# scenarios the mutant runs write themselves (not shipped: a test of one comparison's clock)
+GENERATED_SCENARIOS = {"bot_near_rail": bot_near_rail}
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
 
@@ -180,8 +201,12 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
             for scenario, overrides, stall, particles in runs:
                 run_cfg = load_config(config_path(t.config), {"filter.lanes": t.lanes,
                                                               **overrides})
+                source = scenario
+                if scenario in GENERATED_SCENARIOS:
+                    source = GENERATED_SCENARIOS[scenario](run_cfg,
+                                                           build_root.parent / f"{scenario}.csv")
                 res = run_filter(run_cfg, RunArgs(FILTER_RUN["steps"], particles,
-                                                  1, scenario, SIM, False, stall=stall),
+                                                  1, source, SIM, False, stall=stall),
                                  progress=False, build_root=build_root, template_dir=template_dir)
                 if not res["passed"]:
                     return "killed", (f"scenario {scenario or 'default'} {overrides or ''}"
