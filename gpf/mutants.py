@@ -486,7 +486,14 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
     unreached = sum(not a for a in assigned.values())
     log(f"gpf mutants: {len(chosen)} of {len(in_scope)} mutants ({unreached} sites of "
         f"{len(mutants)} rendered in no config), level {level}, {SIM}")
-    camp = run_campaign(chosen, assigned, work, level, log)
+    partial = Campaign([], unreached, len(in_scope))
+
+    def update(v: Verdict) -> None:   # the report rewritten after each: an interrupted run
+        partial.verdicts.append(v)     # keeps what it did
+        write_report(partial, out, command + f" (in progress: {len(partial.verdicts)} of "
+                     f"{len(chosen)} run)")
+
+    camp = run_campaign(chosen, assigned, work, level, log, on_verdict=update)
     camp.total = len(in_scope)
     camp.unreached = unreached
     json_path, md_path = write_report(camp, out, command)
