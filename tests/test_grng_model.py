@@ -15,6 +15,7 @@ import pytest
 from scipy.special import ndtri
 
 from gpf.config import load_config
+from gpf.model.fixed import shift_round
 from gpf.model.grng import (
     COMPONENTS,
     LFSR258,
@@ -304,3 +305,20 @@ def test_lanes_differ_and_seeds_reproduce():
     assert np.array_equal(model.normals_raw(100), model.normals_raw(100, seed=cfg.grng.seed))
     assert np.array_equal(model.normals_raw_from_words(seed_words(5, 2), 4000), z)
     assert np.array_equal(model.normals(4000, seed=5), z * model.out.lsb)
+
+
+@pytest.mark.parametrize("name", ["bot", "odd", "uav", "uav_seed002"])
+def test_no_table_entry_rounds_below_zero(name):
+    """The inversion's clamp at 0 (grng_icdf.sv's mag_wide < 0) is never reached: the Horner
+    value before the clamp, at every ROM address and every offset x (every pair a uniform word
+    can select), is >= 0 in each shipped config. equivalent.toml's grng_icdf.sv.j2:118:23 and
+    code_holes.toml's clamp entry rest on this."""
+    model = GrngModel(_config(name))
+    xw = model.seg.offset_bits
+    xs = np.arange(1 << xw, dtype=np.int64)
+    lowest = min(
+        int(shift_round(shift_round(model._s1(np.full(xs.shape, addr), xs) * xs, xw, "half_up",
+                                    width=62) + model.lut[addr, 0],
+                        model.guard_bits, "half_up", width=62).min())
+        for addr in range(model.seg.depth))
+    assert lowest >= 0
