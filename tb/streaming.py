@@ -68,13 +68,17 @@ def with_operands(block: StreamBlock, seen: dict[str, np.ndarray], lasts: list[b
 
 def _op_words(block: StreamBlock, ops: dict[str, np.ndarray] | None, lasts: list[bool]
               ) -> list[int | None]:
-    """The `op` word to drive with each beat: a step's operands with its first beat."""
+    """The `op` word to drive with each beat: a step's operands with its first beat, their
+    bitwise complement from its second (the block samples op with a step's first beat and must
+    hold it: a block that read op later would see the complement); None: unchanged."""
     if not block.fields_op:
         return [None] * len(lasts)
     words = pack(block.fields_op, {k: np.asarray(v)[:, None] for k, v in ops.items()})
+    mask = (1 << sum(f.fmt.width for f in block.fields_op)) - 1
     firsts = [True] + list(lasts[:-1])
-    steps = step_numbers(lasts)
-    return [words[s] if first else None for s, first in zip(steps, firsts, strict=True)]
+    seconds = [False] + firsts[:-1]
+    return [words[s] if first else ~words[s] & mask if second and not first else None
+            for s, first, second in zip(step_numbers(lasts), firsts, seconds, strict=True)]
 
 
 async def run_stream(dut: SimHandleBase, block: StreamBlock, b: Bench,
