@@ -62,7 +62,7 @@ module tb;
   end
 endmodule
 """)
-    subprocess.run(["iverilog", "-g2012", "-o", "sim.vvp", "tb.sv", str(rtl)], cwd=work,
+    subprocess.run(["iverilog", "-g2012", "-o", "sim.vvp", "tb.sv", str(rtl.resolve())], cwd=work,
                    check=True, capture_output=True, text=True)
     run = subprocess.run(["vvp", "-n", "sim.vvp"], cwd=work, capture_output=True, text=True)
     if run.returncode != 0 or "FATAL" in run.stdout:
