@@ -44,37 +44,56 @@ APP_CONFIGS = {"bot": ("bot", "odd"), "uav": ("uav", "uav_seed002")}
 # run (as tests/test_sim_filter.py's mutants), then runs that raise the flags the first never
 # does (every step below the ESS threshold, an outlier measurement, a target out of range, a
 # bearing glitch whose weights collapse onto one particle: at N = 32 its ESS rounds to 1.0,
-# exactly the LOW_ESS threshold N/32; a target near the rail, a few particles saturating),
+# exactly the LOW_ESS threshold N/32; a target near the rail, a few particles saturating; a
+# saturation in sample_cond alone, at LANES 2; one in weight alone),
 # two lanes (a lane's indexing is the same at LANES 1) and every stream stalled half the
 # clocks (the handshakes): (scenario, config overrides, stall, particles). The far target and
 # the rail run 512 particles, more than the pipeline holds, so saturations are flagged while
 # particles still stream, not only after the last has left ctrl.
 FILTER_RUN = {"steps": 5, "particles": 32}
 FILTER_ESCALATION = ((None, {}, 0.0, 32), (None, {"filter.ess_min": 1}, 0.0, 32),
-                     ("bot_outlier", {}, 0.0, 32), ("bot_far_target", {}, 0.0, 512),
-                     ("bot_bearing_glitch", {}, 0.0, 32), ("bot_near_rail", {}, 0.0, 512),
-                     (None, {"filter.lanes": 2}, 0.0, 32), (None, {}, 0.5, 32))
+                     ("bot_outlier", {}, 0.0, 32), ("bot_bearing_glitch", {}, 0.0, 32),
+                     ("bot_cond_rail", {"filter.lanes": 2}, 0.0, 32),
+                     ("bot_far_observer", {}, 0.0, 32),
+                     (None, {"filter.lanes": 2}, 0.0, 32), (None, {}, 0.5, 32),
+                     ("bot_far_target", {}, 0.0, 512), ("bot_near_rail", {}, 0.0, 512))
 
 
-def bot_near_rail(cfg, path: Path) -> str:
-    """A CSV scenario (written to `path`) whose cloud sits 0.25 m inside x's top: a few of each
-    step's particles saturate, spread through the step, so in some steps only particles that
-    leave ctrl early do (the far target saturates every one). Its second step at 512 particles
-    (the model's draws of seed 1): 21 saturate among the first 464, none among the last 48."""
+def _bot_csv(cfg, path: Path, name: str, mean: tuple[float, ...],
+             observer: tuple[float, float]) -> str:
+    """A bot CSV scenario (written to `path`) from an initial mean (x, vx, y, vy), the format's
+    edge E as `e` in it, and a fixed observer."""
     import numpy as np
 
     from gpf.model.scenarios import _bot, write_csv
 
-    steps, edge = FILTER_RUN["steps"], float(cfg.formats["state"].max_real)
-    observer = np.zeros((steps + 1, 2))
-    observer[0] = np.nan
-    write_csv(_bot(cfg, steps, 1, observer, "bot_near_rail",
-                   np.array([edge - 0.25, 0.0, 1.0, 0.0])), path)
+    steps = FILTER_RUN["steps"]
+    obs = np.tile(np.array(observer, dtype=float), (steps + 1, 1))
+    obs[0] = np.nan
+    write_csv(_bot(cfg, steps, 1, obs, name, np.array(mean)), path)
     return str(path)
 
 
-# scenarios the mutant runs write themselves (not shipped: a test of one comparison's clock)
-GENERATED_SCENARIOS = {"bot_near_rail": bot_near_rail}
+def _edge(cfg) -> float:
+    return float(cfg.formats["state"].max_real)
+
+
+# scenarios the mutant runs write themselves (not shipped: each a test of one flag's path):
+# bot_near_rail: the cloud 0.25 m inside x's top, a few of each step's particles saturating,
+#   spread through the step (its second step at 512 particles, seed 1: 21 saturate among the
+#   first 464, none among the last 48), so in some steps only particles that leave ctrl early do;
+# bot_cond_rail: a target at x = E - 0.2 moving out, one particle in its first step saturating
+#   in sample_cond and nowhere else (at LANES 2: one lane of one beat);
+# bot_far_observer: the target and the observer 200 m apart in x, beyond weight's difference
+#   format, so weight saturates every particle while nothing else does
+GENERATED_SCENARIOS = {
+    "bot_near_rail": lambda cfg, p: _bot_csv(cfg, p, "bot_near_rail",
+                                             (_edge(cfg) - 0.25, 0.0, 1.0, 0.0), (0.0, 0.0)),
+    "bot_cond_rail": lambda cfg, p: _bot_csv(cfg, p, "bot_cond_rail",
+                                             (_edge(cfg) - 0.2, -3.0, 1.0, 0.0), (0.0, 0.0)),
+    "bot_far_observer": lambda cfg, p: _bot_csv(cfg, p, "bot_far_observer",
+                                                (100.0, 0.0, 1.0, 0.0), (-100.0, 0.0)),
+}
 SIM = "icarus"   # about 1 s to compile a block; a Verilator build costs 10 to 60 s a mutant
 
 
