@@ -5,10 +5,9 @@ mutated text, or a whole filter (gpf_bot, gpf_uav) for the tops' own templates. 
 Icarus against that block's own cocotb testbench (the whole filter's short `gpf run` for the
 tops), each in a child process with a wall-clock limit, at rising test levels while it
 survives, then against each other target whose RTL holds the text while it still survives.
-Verdicts: killed (a test failed, or an
-RTL check stopped the simulator with $fatal), survived, stillborn (the template did not render
-or the RTL did not compile: not scored) and hung (the wall clock ran out before the testbench's
-own timeouts saw anything: scored as a survivor).
+Verdicts: killed (a test failed, or an RTL check stopped the simulator with $fatal), survived,
+stillborn (the template did not render or the RTL did not compile: not scored) and hung (the
+wall clock ran out before the testbench's own timeouts saw anything: scored as a survivor).
 
 Survivors listed in tests/data/mutants/equivalent.toml (id -> reason, with the text the mutant
 replaces, so an entry goes stale when its line changes) are marked equivalent in the report.
@@ -61,8 +60,8 @@ FILTER_ESCALATION = ((None, {}, 0.0, 32), (None, {"filter.ess_min": 1}, 0.0, 32)
 
 def _bot_csv(cfg, path: Path, name: str, mean: tuple[float, ...],
              observer: tuple[float, float]) -> str:
-    """A bot CSV scenario (written to `path`) from an initial mean (x, vx, y, vy), the format's
-    edge E as `e` in it, and a fixed observer."""
+    """A bot CSV scenario (written to `path`): the truth drawn around an initial mean (x, vx,
+    y, vy), bearings from a fixed observer (seed 1)."""
     import numpy as np
 
     from gpf.model.scenarios import _bot, write_csv
@@ -356,16 +355,14 @@ def run_campaign(mutants: list[Mutant], assigned: dict[str, list[Target]], work:
     shutil.rmtree(templates, ignore_errors=True)
     shutil.copytree(TEMPLATE_DIR, templates)
 
-    def baseline(t: Target) -> float:
-        """The unmutated target's time at the first level (run once; templates unmutated)."""
-        if t.name not in camp.baseline:
-            status, detail, seconds = simulate(t, templates, work, first_level(t, level), 600)
-            if status != "survived":
-                raise RuntimeError(f"the unmutated {t.name} does not pass ({status}: "
-                                   f"{detail}); see {work / 'sim.log'}")
-            camp.baseline[t.name] = round(seconds, 1)
-            log(f"baseline {t.name}: passed in {seconds:.1f} s")
-        return camp.baseline[t.name]
+    def baseline(t: Target) -> None:
+        """The unmutated target's time at the first level (templates unmutated)."""
+        status, detail, seconds = simulate(t, templates, work, first_level(t, level), 600)
+        if status != "survived":
+            raise RuntimeError(f"the unmutated {t.name} does not pass ({status}: "
+                               f"{detail}); see {work / 'sim.log'}")
+        camp.baseline[t.name] = round(seconds, 1)
+        log(f"baseline {t.name}: passed in {seconds:.1f} s")
 
     def run(t: Target) -> tuple[str, str, float]:
         """One target, its levels while the mutant survives."""
@@ -388,14 +385,16 @@ def run_campaign(mutants: list[Mutant], assigned: dict[str, list[Target]], work:
     for n, mu in enumerate(mutants, 1):
         t, others = assigned[mu.id][0], assigned[mu.id][1:]
         original = (TEMPLATE_DIR / mu.template).read_text()
-        for other in others:   # the baselines a survivor may need, before the mutant goes in
-            baseline(other)
         (templates / mu.template).write_text(mu.apply(original))
         try:
             status, detail, seconds = run(t)
             for other in others:
                 if status != "survived":
                     break
+                if other.name not in camp.baseline:   # its baseline runs unmutated, once
+                    (templates / mu.template).write_text(original)
+                    baseline(other)
+                    (templates / mu.template).write_text(mu.apply(original))
                 status, detail, more = run(other)
                 detail = f"{other.name}: {detail} (after surviving {t.name})"
                 seconds += more
