@@ -77,7 +77,7 @@ def _op_words(block: StreamBlock, ops: dict[str, np.ndarray] | None, lasts: list
     mask = (1 << sum(f.fmt.width for f in block.fields_op)) - 1
     firsts = [True] + list(lasts[:-1])
     seconds = [False] + firsts[:-1]
-    return [words[s] if first else ~words[s] & mask if second and not first else None
+    return [words[s] if first else (~words[s] & mask if second else None)
             for s, first, second in zip(step_numbers(lasts), firsts, seconds, strict=True)]
 
 
