@@ -22,6 +22,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import tomllib
 from dataclasses import asdict, dataclass, field
@@ -490,7 +491,8 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
              level: str = "quick", out: Path = Path("build/mutants"), list_only: bool = False,
              command: str = "gpf mutants", log=print) -> Path | None:
     """Scan, assign, select, run and report; with `list_only`, print the selection only."""
-    work = out / "work"
+    # a listing renders in a folder of its own (a campaign may be running in out/work)
+    work = Path(tempfile.mkdtemp(prefix="gpf-mutants-")) if list_only else out / "work"
     work.mkdir(parents=True, exist_ok=True)
     # only the templates the selection can reach: a module's own, a mutant id's
     names = None
@@ -505,6 +507,7 @@ def campaign(module: str | None = None, ids: list[str] | None = None,
         for mu in chosen:
             log(f"{mu.id}\t{' '.join(t.name for t in assigned[mu.id])}\t"
                 f"{mu.before!r} -> {mu.after!r}")
+        shutil.rmtree(work, ignore_errors=True)
         return None
     in_scope = [mu for mu in mutants if assigned[mu.id]
                 and (module is None or assigned[mu.id][0].module == module)]
