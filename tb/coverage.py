@@ -235,6 +235,12 @@ def sample_block(block, app: str, lanes: int, got: dict[str, np.ndarray], lasts_
 SIGMAS = ("0-1", "1-2", "2-3", "3-4", "4-5", "5+")
 
 
+def z_band(z_real: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's sign (negative) and band of |z| in sigmas (an index into SIGMAS)."""
+    z = np.asarray(z_real, dtype=float)
+    return z < 0, np.minimum(np.floor(np.abs(z)), len(SIGMAS) - 1).astype(int)
+
+
 def sample_grng(app: str, lanes: int, z_real: np.ndarray) -> None:
     """A batch of the GRNG's samples (reals): LANES, and each sign's band of |z| in sigmas."""
     if not enabled():
@@ -243,8 +249,7 @@ def sample_grng(app: str, lanes: int, z_real: np.ndarray) -> None:
     g.point("lanes", (f"lanes {n}" for n in LANES))
     g.point("z", (f"{sign}{band}" for sign in "-+" for band in SIGMAS))
     g.hit("lanes", f"lanes {lanes}")
-    z = np.asarray(z_real, dtype=float).reshape(-1)
-    band = np.minimum(np.floor(np.abs(z)), len(SIGMAS) - 1).astype(int)
+    negative, band = z_band(np.reshape(z_real, -1))
     g.hit("z", *sorted({f"{'-' if neg else '+'}{SIGMAS[k]}"
-                        for neg, k in zip(z < 0, band, strict=True)}))
+                        for neg, k in zip(negative, band, strict=True)}))
     save()

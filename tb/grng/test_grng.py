@@ -177,18 +177,18 @@ async def test_reseed_mid_stream(dut: SimHandleBase) -> None:
     sb.assert_clean()
 
 
-# the tail bands a seed search looks for: |z| in [4, 5) and beyond 5, each sign (a fixed seed
-# draws there once in 3.2e-5 and 2.9e-7 samples a side: random runs miss them)
-TAIL_BANDS = {"+4-5": (4.0, 5.0), "-4-5": (-5.0, -4.0), "+5+": (5.0, np.inf),
-              "-5+": (-np.inf, -5.0)}
+# the tail bands a seed search looks for, as the coverage bins them (sign, index into
+# coverage.SIGMAS): |z| in [4, 5) and beyond 5, each sign (a fixed seed draws there once in
+# 3.2e-5 and 2.9e-7 samples a side: random runs miss them)
+TAIL_BANDS = {"+4-5": (False, 4), "-4-5": (True, 4), "+5+": (False, 5), "-5+": (True, 5)}
 TAIL_DRAWS = 2_000           # per lane after each seed load
 TAIL_SEARCH = 40_000         # seeds tried, 512 at a time, before the search gives up
 
 
 def in_band(z: np.ndarray, band: str) -> np.ndarray:
-    """Samples in a tail band, its edges as tb/coverage.py's sigma bands (floor of |z|)."""
-    lo, hi = TAIL_BANDS[band]
-    return (z >= lo) & (z < hi) if lo >= 0 else (z > lo) & (z <= hi)
+    """Samples in a tail band (tb/coverage.py's bins)."""
+    negative, k = coverage.z_band(z)
+    return (negative == TAIL_BANDS[band][0]) & (k == TAIL_BANDS[band][1])
 
 
 def tail_seeds(model: GrngModel, noise, first: int) -> dict[str, int]:
