@@ -250,14 +250,23 @@ def test_fault_flagged_and_survived(fault: str) -> None:
         assert res["rescales"] > 0, "no beat after a step's first brought a new best particle"
 
 
+# bot's first result not taken for three steps' time (a step is N + about 300 clocks)
+HELD = {"steps": 3, "seed": 3}
+
+
+def held_spec(particles: int) -> dict:
+    return {**HELD, "particles": particles, "est_hold": 3 * (particles + 300)}
+
+
 def held_result_run(particles: int = 64) -> None:
     """bot's first result not taken for three steps' time: the second result waits in the
     controller (its S_OUT wait) until the first is taken, and every value is still right (the
     testbench checks that the hold did outlast the second step: FilterBench.check_held)."""
-    result, res = filter_run("bot", "verilator", 1, 3, particles, seed=3, testcase="test_filter",
-                             verilator_opt=SHORT_OPT,
-                             spec={"est_hold": 3 * (particles + 300)})
-    check_run(result, res, 3, particles, 1, tests=1, stalled=True)
+    spec = held_spec(particles)
+    result, res = filter_run("bot", "verilator", 1, spec["steps"], particles, seed=spec["seed"],
+                             testcase="test_filter", verilator_opt=SHORT_OPT,
+                             spec={"est_hold": spec["est_hold"]})
+    check_run(result, res, spec["steps"], particles, 1, tests=1, stalled=True)
 
 
 @pytest.mark.xdist_group(build_group("bot", "verilator", 1))
@@ -272,9 +281,9 @@ def test_result_held_catches_a_controller_that_does_not_wait(tmp_path: Path) -> 
     templates = mutated_templates(tmp_path, "ctrl-out-no-wait", "ctrl.sv.j2",
                                   "assign out_load = state_q == S_OUT && !est_valid_q;",
                                   "assign out_load = state_q == S_OUT;")
-    spec = {"steps": 3, "particles": 64, "seed": 3, "est_hold": 3 * (64 + 300)}
+    spec = held_spec(64)
     result = run_mutant("ctrl-out-no-wait", load_config("configs/bot.toml"), "gpf_bot", "icarus",
-                        seed=3, testcase="test_filter", template_dir=templates,
+                        seed=spec["seed"], testcase="test_filter", template_dir=templates,
                         build_root=tmp_path / "build", log_file=tmp_path / "sim.log",
                         extra_env={"TEST_LEVEL": "short", "GPF_RUN": json.dumps(spec)})
     assert result is None or result.failed == 1, "a controller that does not wait passed"
