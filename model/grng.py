@@ -254,13 +254,17 @@ class GrngModel:
         xw = self.seg.offset_bits
         return shift_round(self.lut[addr, 2] * x, xw, "half_up", width=64 - 2) + self.lut[addr, 1]
 
-    def _horner(self, addr: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """|z| raw in the output format: ((c2 x) + c1) x + c0, rounded half up, at least 0."""
+    def unclamped_magnitude(self, addr: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """((c2 x) + c1) x + c0 in the output format, rounded half up: |z| before the clamp at
+        0 (grng_icdf.sv's mag_wide)."""
         xw = self.seg.offset_bits
         s1 = self._s1(addr, x)
         s2 = shift_round(s1 * x, xw, "half_up", width=64 - 2) + self.lut[addr, 0]
-        mag = shift_round(s2, self.guard_bits, "half_up", width=64 - 2)
-        return np.maximum(mag, 0)
+        return shift_round(s2, self.guard_bits, "half_up", width=64 - 2)
+
+    def _horner(self, addr: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """|z| raw in the output format: ((c2 x) + c1) x + c0, rounded half up, at least 0."""
+        return np.maximum(self.unclamped_magnitude(addr, x), 0)
 
     def from_uniforms(self, u: np.ndarray) -> np.ndarray:
         """Raw normal samples (int64, output format) for uniform words of any shape."""
