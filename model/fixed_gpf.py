@@ -12,6 +12,7 @@ every line-rate block runs once over all of them; `step` is the same for one run
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -233,6 +234,21 @@ class FixedRun:
     ess: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (steps+1,), NaN at k = 0
 
 
+def step_results(gpf: FixedGPF, scenario, draws: np.ndarray,
+                 keep_particles: bool = False) -> Iterator[StepResult]:
+    """Each step's result over a whole scenario, from the float model's initial estimate."""
+    from gpf.model.float_gpf import FloatGPF
+
+    mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(scenario)
+    mu, chol = gpf.init(mu0, sigma0)
+    sigma = gpf.quantise_sigma(sigma0)
+    for k in range(1, scenario.steps + 1):
+        res = gpf.step(mu, chol, sigma, gpf.quantise_inputs(scenario.step_inputs(k)),
+                       draws[k - 1], keep_particles=keep_particles)
+        mu, chol, sigma = res.mu, res.chol, res.sigma
+        yield res
+
+
 def run(gpf: FixedGPF, scenario, draws: np.ndarray | None = None,
         seed: int | None = None) -> FixedRun:
     """Filter a whole scenario (see scenarios.py); draws default to the GRNG model's (seed)."""
@@ -242,20 +258,18 @@ def run(gpf: FixedGPF, scenario, draws: np.ndarray | None = None,
     if draws is None:
         draws = gpf.draws(steps, seed)
     mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(scenario)
-    mu, chol = gpf.init(mu0, sigma0)
-    sigma = gpf.quantise_sigma(sigma0)
     out_mu = np.empty((steps + 1, n))
     out_sigma = np.empty((steps + 1, n, n))
     flags = np.zeros(steps + 1, dtype=np.int64)
     ess = np.full(steps + 1, np.nan)
-    out_mu[0], out_sigma[0] = gpf.to_real_mu(mu), gpf.to_real_sigma(sigma)
-    for k in range(1, steps + 1):
-        res = gpf.step(mu, chol, sigma, gpf.quantise_inputs(scenario.step_inputs(k)),
-                       draws[k - 1])
-        mu, chol, sigma = res.mu, res.chol, res.sigma
-        out_mu[k], out_sigma[k], flags[k] = gpf.to_real_mu(mu), gpf.to_real_sigma(sigma), res.flags
+    out_mu[0] = gpf.to_real_mu(gpf.init(mu0, sigma0)[0])
+    out_sigma[0] = gpf.to_real_sigma(gpf.quantise_sigma(sigma0))
+    for k, res in enumerate(step_results(gpf, scenario, draws), start=1):
+        out_mu[k], out_sigma[k], flags[k] = (gpf.to_real_mu(res.mu), gpf.to_real_sigma(res.sigma),
+                                             res.flags)
         ess[k] = gpf.to_real_ess(res.ess)
     return FixedRun(out_mu, out_sigma, flags, draws, ess)
 
 
-__all__ = ["BatchStep", "DrawStream", "Flag", "FixedGPF", "FixedRun", "StepResult", "run"]
+__all__ = ["BatchStep", "DrawStream", "Flag", "FixedGPF", "FixedRun", "StepResult", "run",
+           "step_results"]

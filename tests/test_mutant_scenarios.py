@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from gpf.config import config_path, load_config
-from gpf.model.fixed_gpf import FixedGPF, ess_threshold
-from gpf.model.float_gpf import FloatGPF
+from gpf.model.fixed_gpf import FixedGPF, ess_threshold, step_results
 from gpf.model.scenarios import bot_bearing_glitch, read_csv
 from gpf.mutants import FILTER_ESCALATION, FILTER_RUN, GENERATED_SCENARIOS
 
@@ -21,16 +20,7 @@ TAIL = 48   # particles still in flight when ctrl leaves S_RUN (at least the pip
 def steps_of(cfg, scenario, particles: int) -> list:
     """Each step's model result with its particles' SAT taps (GRNG seed 1, as the runs)."""
     g = FixedGPF(cfg, particles)
-    draws = g.draws(scenario.steps, 1)
-    mu0, s0 = FloatGPF(cfg, particles).initial(scenario)
-    mu, chol = g.init(mu0, s0)
-    sigma, out = g.quantise_sigma(s0), []
-    for k in range(1, scenario.steps + 1):
-        r = g.step(mu, chol, sigma, g.quantise_inputs(scenario.step_inputs(k)), draws[k - 1],
-                   keep_particles=True)
-        out.append(r)
-        mu, chol, sigma = r.mu, r.chol, r.sigma
-    return out
+    return list(step_results(g, scenario, g.draws(scenario.steps, 1), keep_particles=True))
 
 
 def sat(r, tap: str) -> np.ndarray:

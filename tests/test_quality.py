@@ -13,7 +13,7 @@ import pytest
 from gpf.config import load_config
 from gpf.model import blocks
 from gpf.model.blocks import Flag
-from gpf.model.fixed_gpf import FixedGPF
+from gpf.model.fixed_gpf import FixedGPF, step_results
 from gpf.model.scenarios import bot_bearing_glitch
 from gpf.study.montecarlo import monte_carlo
 
@@ -34,18 +34,9 @@ def test_bot_quality(scenario: str) -> None:
 def glitch_step(gpf: FixedGPF):
     """Step 3 of bot_bearing_glitch (a bearing 10 sigma off): its result and the Sigma it
     sampled from."""
-    from gpf.model.float_gpf import FloatGPF
-
     sc = bot_bearing_glitch(gpf.cfg, 3, 1)
-    draws = gpf.draws(3, seed=1)
-    mu0, sigma0 = FloatGPF(gpf.cfg, gpf.particles).initial(sc)
-    mu, chol = gpf.init(mu0, sigma0)
-    sigma = gpf.quantise_sigma(sigma0)
-    for k in (1, 2, 3):
-        prev = sigma
-        res = gpf.step(mu, chol, sigma, gpf.quantise_inputs(sc.step_inputs(k)), draws[k - 1])
-        mu, chol, sigma = res.mu, res.chol, res.sigma
-    return res, prev
+    results = list(step_results(gpf, sc, gpf.draws(3, seed=1)))
+    return results[2], results[1].sigma
 
 
 def test_weights_never_all_underflow() -> None:
