@@ -63,14 +63,9 @@ def _bot_csv(cfg, path: Path, name: str, mean: tuple[float, ...],
              observer: tuple[float, float]) -> str:
     """A bot CSV scenario (written to `path`): the truth drawn around an initial mean (x, vx,
     y, vy), bearings from a fixed observer (seed 1)."""
-    import numpy as np
+    from gpf.model.scenarios import bot_still_observer, write_csv
 
-    from gpf.model.scenarios import _bot, write_csv
-
-    steps = FILTER_RUN["steps"]
-    obs = np.tile(np.array(observer, dtype=float), (steps + 1, 1))
-    obs[0] = np.nan
-    write_csv(_bot(cfg, steps, 1, obs, name, np.array(mean)), path)
+    write_csv(bot_still_observer(cfg, FILTER_RUN["steps"], 1, name, mean, observer), path)
     return str(path)
 
 

@@ -127,12 +127,19 @@ def _bot(cfg: Any, steps: int, seed: int, observer: Array, name: str,
                     {"generator": name, "seed": int(seed), "config": cfg.name})
 
 
+def bot_still_observer(cfg: Any, steps: int, seed: int, name: str,
+                       mean: Array | None = None, observer: Array = (0.0, 0.0)) -> Scenario:
+    """A target drawn around `mean` (x, vx, y, vy; the config's x0 unless given) seen from an
+    observer standing at `observer`: seed 003's scenario, and the edge cases tests build."""
+    _for_app(cfg, "bot", name)
+    where = np.tile(np.asarray(observer, dtype=float), (steps + 1, 1))
+    where[0] = np.nan
+    return _bot(cfg, steps, seed, where, name, None if mean is None else np.asarray(mean))
+
+
 def bot_fixed_observer(cfg: Any, steps: int, seed: int) -> Scenario:
     """Seed 003's scenario: observer at the origin, so the range is unobservable."""
-    _for_app(cfg, "bot", "bot_fixed_observer")
-    observer = np.zeros((steps + 1, 2))
-    observer[0] = np.nan
-    return _bot(cfg, steps, seed, observer, "bot_fixed_observer")
+    return bot_still_observer(cfg, steps, seed, "bot_fixed_observer")
 
 
 def observer_path(t: Array, base: Array, cross: Array, weave: float = OBSERVER_WEAVE,

@@ -258,16 +258,13 @@ EDGE_TARGETS = {
 def test_coverage_edge_targets(tmp_path: Path, target: str) -> None:
     from test_sim_filter import SHORT_OPT, check_run, filter_run
 
-    from gpf.model.scenarios import _bot, write_csv
+    from gpf.model.scenarios import bot_still_observer, write_csv
 
     cfg = load_config("configs/bot.toml")
     steps, edge = 4, float(cfg.formats["state"].max_real)
     mean, where = EDGE_TARGETS[target](edge)
-    observer = np.tile(np.array(where, dtype=float), (steps + 1, 1))
-    observer[0] = np.nan
-    sc = _bot(cfg, steps, 5, observer, f"edge-{target}", np.array(mean))
     path = tmp_path / f"edge-{target}.csv"
-    write_csv(sc, path)
+    write_csv(bot_still_observer(cfg, steps, 5, f"edge-{target}", mean, where), path)
     result, res = filter_run("bot", "verilator", 1, steps, 64, seed=1, scenario=str(path),
                              testcase="test_filter", verilator_opt=SHORT_OPT)
     check_run(result, res, steps, 64, 1, tests=1)
