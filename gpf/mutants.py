@@ -15,9 +15,9 @@ replaces, so an entry goes stale when its line changes) are marked equivalent in
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -308,16 +308,25 @@ def equivalents(path: Path = EQUIVALENT_FILE) -> dict[str, dict]:
     return tomllib.loads(path.read_text()) if path.exists() else {}
 
 
+def _rank(salt: str, mutant_id: str) -> int:
+    """A mutant's place in a seeded order from its id alone, so a sample or a shard keeps its
+    mutants when a template edit adds or removes others elsewhere."""
+    return int.from_bytes(hashlib.sha256(f"{salt}:{mutant_id}".encode()).digest()[:8], "big")
+
+
 def select(mutants: list[Mutant], assigned: dict[str, list[Target]], module: str | None,
            ids: list[str] | None, sample: int | None, seed: int, shards: int,
            shard: int) -> list[Mutant]:
+    """The mutants to run, in template order: the `sample` ranked first by the seed (all when
+    None), then those of shard `shard` of `shards` (by id, whatever the sample)."""
     chosen = [mu for mu in mutants if assigned[mu.id]
               and (module is None or assigned[mu.id][0].module == module)
               and (not ids or mu.id in ids)]
     if sample is not None and sample < len(chosen):
-        order = {mu.id: i for i, mu in enumerate(mutants)}
-        chosen = sorted(random.Random(seed).sample(chosen, sample), key=lambda mu: order[mu.id])
-    return [mu for i, mu in enumerate(chosen) if i % shards == shard]
+        kept = {mu.id for mu in sorted(chosen, key=lambda mu: _rank(f"sample-{seed}", mu.id))
+                [:sample]}
+        chosen = [mu for mu in chosen if mu.id in kept]
+    return [mu for mu in chosen if _rank("shard", mu.id) % shards == shard]
 
 
 def unified_diff(mu: Mutant) -> str:

@@ -20,7 +20,8 @@ CLASSES = ("arith", "logic", "shift", "compare", "const", "slice", "negate", "re
 
 _JINJA = re.compile(r"\{\{.*?\}\}|\{%.*?%\}|\{#.*?#\}", re.S)
 _DECLARATION = re.compile(r"^\s*(?:input|output|inout|logic|wire|reg|bit|int|integer|"
-                          r"localparam\s+(?:logic|bit)|parameter\s+(?:logic|bit))\b")
+                          r"localparam\s+(?:logic|bit)|parameter\s+(?:logic|bit)|"
+                          r"function|task)\b")
 _IDENT = r"[A-Za-z_$][\w$]*"
 _WINDOW = 400   # how far back an lvalue or an operand is looked for
 

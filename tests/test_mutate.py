@@ -12,7 +12,7 @@ import pytest
 
 from gpf.mutants import EQUIVALENT_FILE, campaign, equivalents
 from gpf.rtl.generate import TEMPLATE_DIR
-from gpf.rtl.mutate import mask, scan, scan_dir
+from gpf.rtl.mutate import Mutant, mask, scan, scan_dir
 from gpf.toolchain import icarus_missing
 
 SMALL = """{% set w = 4 %}
@@ -46,6 +46,36 @@ def test_small_template_mutants_are_exactly_the_literal_sites() -> None:
         ("t.sv.j2:14:22:arith", "+", "-"),
         ("t.sv.j2:14:27:const", "1", "0"),
     }
+
+
+def test_a_functions_declared_ranges_are_not_mutated() -> None:
+    """A function's return and input ranges are types, as a signal's are; its body is logic."""
+    text = SMALL.replace("endmodule", """  function automatic logic [3:0] f(input logic [3:0] r);
+    f = r + 4'd1;
+  endfunction
+endmodule""")
+    lines = {int(mu.id.split(":")[1]) for mu in scan("t.sv.j2", text)}
+    assert 16 not in lines and 17 in lines
+
+
+def test_a_sample_and_a_shard_keep_their_mutants_when_others_change() -> None:
+    """Removing mutants (a template edited elsewhere) leaves the rest of a sample and of each
+    shard as they were; the shards split a selection exactly once."""
+    from gpf.mutants import Target, select
+
+    mutants = [Mutant("t.sv.j2", i, i, 1, "const", "1", "0") for i in range(1, 401)]
+    assigned = {mu.id: [Target("sqrt", "bot")] for mu in mutants}
+
+    def ids(ms, sample=None, shards=1, shard=0):
+        return [mu.id for mu in select(ms, assigned, None, None, sample, 1, shards, shard)]
+
+    sample = ids(mutants, 50)
+    fewer = [mu for mu in mutants if mu.id not in sample[:3]]
+    assert len(sample) == 50 and set(sample[3:]) <= set(ids(fewer, 50))
+    shards = [ids(mutants, shards=4, shard=i) for i in range(4)]
+    assert sorted(sum(shards, [])) == sorted(mu.id for mu in mutants)
+    assert all(set(ids(fewer, shards=4, shard=i)) == set(shards[i]) - set(sample[:3])
+               for i in range(4))
 
 
 def _jinja_spans(text: str) -> list[tuple[int, int, str]]:
