@@ -310,7 +310,7 @@ def test_lanes_differ_and_seeds_reproduce():
 def test_no_table_entry_rounds_below_zero(name):
     """The inversion's clamp at 0 (grng_icdf.sv's mag_wide < 0) is never reached: the Horner
     value before the clamp, at every ROM address and every offset x (every pair a uniform word
-    can select), is >= 0 in each shipped config. equivalent.toml's grng_icdf.sv.j2:118:23 and
+    can select), is >= 0 in each shipped config. equivalent.toml's grng_icdf.sv.j2:118:32 and
     code_holes.toml's clamp entry rest on this."""
     model = GrngModel(_config(name))
     xs = np.arange(1 << model.seg.offset_bits, dtype=np.int64)
