@@ -371,18 +371,24 @@ def _operand_copies(prods: list[dict[str, Any]], before: list[dict[str, Any]]) -
             before.append({"dup": ln[key], "w": ln[wkey], "d": d})
 
 
+CSA_LEVELS = 3   # 3:2 levels a clock: after a multiplier's output (its route ~3 ns on ECP5), the
+                 # 12 to 13 parts of C(q)'s entries and of q' took five in one clock (105 MHz)
+
+
 def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, int, int]]]
-                ) -> tuple[list[dict], list[dict]]:
-    """A stage of rounded sums as two: C, every term (a product: its parts) at the common
-    fraction, a subtracted one as ~x (+1 in the constant), reduced carry-save to two words,
-    registered; R, their one carry chain, the rounding shift and the saturation. Widths and
-    saturation come from the whole terms' exact ranges (the parts add up modulo 2^sw)."""
+                ) -> tuple[list[list[dict]], list[dict]]:
+    """A stage of rounded sums as C stages and R: C, every term (a product: its parts) at the
+    common fraction, a subtracted one as ~x (+1 in the constant), reduced carry-save to two
+    words, at most CSA_LEVELS levels a clock (a sum with more is registered between: it takes
+    more C stages, and so do the others of its stage, delayed), registered; R, their one carry
+    chain, the rounding shift and the saturation. Widths and saturation come from the whole
+    terms' exact ranges (the parts add up modulo 2^sw, and so does each carry-save stage)."""
+    plans = []
     for ln in lines:
         ops = []
         for t in ln["terms"]:
             for name, w, sh in parts.get(t["name"], [(t["name"], t["w"], 0)]):
                 ops.append({"neg": t["neg"], "name": name, "w": w, "shift": t["shift"] + sh})
-        ln["terms"] = ops
         nneg = sum(p["neg"] for p in ops)
         const = ln["half"] + nneg
         for p in ops:
@@ -391,28 +397,65 @@ def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, in
         fold = next((p for p in ops if not p["neg"] and const < 1 << p["shift"]), None)
         if fold is not None:
             fold["fold"] = True
-        steps, final = _csa_plan(len(ops) + (1 if const and fold is None else 0))
-        ln.update({"nneg": nneg, "const": const, "folded": fold is not None, "csa": steps,
-                   "final": final})
-    return [{"carry_save": ln} for ln in lines], lines
+        ln.update({"terms": ops, "nneg": nneg, "const": const, "folded": fold is not None})
+        plans.append(_csa_stages(len(ops) + (1 if const and fold is None else 0)))
+    depth = max(len(plan) for plan in plans)
+    stages: list[list[dict]] = [[] for _ in range(depth)]
+    for head, plan in zip(lines, plans, strict=True):
+        plan += [([], list(range(len(plan[-1][1]))))] * (depth - len(plan))   # registered again
+        names = [f"{head['base']}_k{k}" for k in range(depth - 1)] + [head["base"]]
+        c = {**head, "csa": plan[0][0], "final": plan[0][1], "base": names[0]}
+        stages[0].append({"carry_save": c})
+        for k in range(1, depth):
+            terms = [{"neg": False, "name": f"{names[k - 1]}_c{j}_q", "w": head["sw"], "shift": 0,
+                      "fold": j == 0} for j in range(len(plan[k - 1][1]))]   # ORs in a 0
+            c = {**head, "terms": terms, "half": 0, "nneg": 0, "const": 0, "folded": True,
+                 "csa": plan[k][0], "final": plan[k][1], "base": names[k]}
+            stages[k].append({"carry_save": c})
+        head["final"] = c["final"]
+    return stages, lines
 
 
 def _shl(expr: str, k: int) -> str:
     return f"({expr} <<< {k})" if k else expr
 
 
-def _csa_plan(n: int) -> tuple[list[tuple[int, int, int, int, int]], list[int]]:
-    """Carry-save reduction of operands 0 .. n-1 to two: steps (a, b, c, sum, carry), new
-    operands numbered from n, three at a time, level by level; and the two (or one) left."""
-    ops, nxt, steps = list(range(n)), n, []
+def _csa_stages(n: int) -> list[tuple[list[tuple[int, int, int, int, int]], list[int]]]:
+    """Carry-save reduction of n operands to two, CSA_LEVELS levels a clock: per clock its
+    steps and the operands it registers (the next clock's operands 0 .. k-1, in that order)."""
+    out = []
+    while True:
+        levels, final = _csa_levels(n)
+        part = levels[:CSA_LEVELS]
+        left = final if len(levels) <= CSA_LEVELS else _alive(n, part)
+        out.append(([s for lv in part for s in lv], left))
+        if len(levels) <= CSA_LEVELS:
+            return out
+        n = len(left)
+
+
+def _csa_levels(n: int) -> tuple[list[list[tuple[int, int, int, int, int]]], list[int]]:
+    """Carry-save reduction of operands 0 .. n-1 to two: per level its steps (a, b, c, sum,
+    carry), new operands numbered from n, three at a time; and the two (or one) left."""
+    ops, nxt, levels = list(range(n)), n, []
     while len(ops) > 2:
-        new = []
+        new, steps = [], []
         for g in range(0, len(ops) - len(ops) % 3, 3):
             steps.append((ops[g], ops[g + 1], ops[g + 2], nxt, nxt + 1))
             new += [nxt, nxt + 1]
             nxt += 2
+        levels.append(steps)
         ops = new + ops[len(ops) - len(ops) % 3:]
-    return steps, ops
+    return levels, ops
+
+
+def _alive(n: int, levels: list[list[tuple[int, int, int, int, int]]]) -> list[int]:
+    """The operands left after these levels of _csa_levels(n)."""
+    ops = list(range(n))
+    for steps in levels:
+        used = {x for s in steps for x in s[:3]}
+        ops = [o for s in steps for o in s[3:]] + [o for o in ops if o not in used]
+    return ops
 
 
 def _to(fmt: Format) -> tuple[int, int]:
@@ -489,37 +532,44 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
         sig, line = _round_sum(f"f{n}", terms, *_to(dp.accel))
         f4.append(sig)
         s4.append(line)
-    # stage 5: h_k q_j (q delayed to stage 4) and f dt
+    stages: list[list[dict[str, Any]]] = []
+
+    def add(prods: list[dict[str, Any]], sums: list[dict[str, Any]]) -> None:
+        if stages:
+            _operand_copies(prods, stages[-1])
+        pre, parts = _split_products(prods, DSP_WIDE_OPERAND[cfg.family])
+        carry_save, rounded = _split_sums(sums, parts)
+        stages.extend([pre, *carry_save, rounded])
+
+    add(s1, s2)
+    add(s3, s4)
+    # stage 5: h_k q_j and f dt, q delayed to its clock (d: the clocks before it)
+    d = len(stages)
     s5, phq, pf = [], {}, []
     for row in _OMEGA_Q:
         for _, k, j in row:
             phq[k, j], line = _product(f"phq{k}{j}", h4[k], dataclasses.replace(
-                x[j], name=f"q{j}_d6"))
+                x[j], name=f"q{j}_d{d}"))
             s5.append(line)
     for n in range(3):
         p, line = _product(f"pf{n}", f4[n], k_dt)
         pf.append(p)
         s5.append(line)
-    # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed to stage 5)
+    # stage 6: q'_i = q_i + sum +-h_k q_j, v'_n = v_n + f_n dt (q, v delayed a clock more)
     s6 = []
     for i, row in enumerate(_OMEGA_Q):
-        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d7"))]
+        terms = [(1, dataclasses.replace(x[i], name=f"q{i}_d{d + 1}"))]
         terms += [(sign, phq[k, j]) for sign, k, j in row]
         s6.append(_round_sum(f"y{i}", terms, *_to(dp.x[i]))[1])
     for n in range(3):
-        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d7")), (1, pf[n])]
+        terms = [(1, dataclasses.replace(x[4 + n], name=f"v{n}_d{d + 1}")), (1, pf[n])]
         s6.append(_round_sum(f"y{4 + n}", terms, *_to(dp.x[4 + n]))[1])
     if len(set(dp.x[:4])) != 1 or len(set(dp.x[4:])) != 1:
         raise ValueError("propagate_uav: q (and v) components must share one format")
     widths = [fmt.width for fmt in dp.x]
-    stages: list[list[dict[str, Any]]] = []
-    for prods, sums in ((s1, s2), (s3, s4), (s5, s6)):
-        if stages:
-            _operand_copies(prods, stages[-1])
-        pre, parts = _split_products(prods, DSP_WIDE_OPERAND[cfg.family])
-        stages += [pre, *_split_sums(sums, parts)]
+    add(s5, s6)
     return {
-        "lanes": cfg.lanes, "latency": len(stages),
+        "lanes": cfg.lanes, "latency": len(stages) + 1, "lane_latency": len(stages),
         "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
         "x_offsets": [sum(widths[:i]) for i in range(len(widths))], "x_width": sum(widths),
         "q_width": dp.x[0].width, "v_width": dp.x[4].width,
@@ -538,7 +588,7 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
         "stages": stages,
         # per stage: its saturating sums (their flags registered, ORed into sat a clock later)
         "ovf": [[ln["base"] for ln in st if ln.get("sat") and "base" in ln] for st in stages],
-        "q_delay": 7,
+        "q_delay": d + 1,
     }
 
 
