@@ -421,41 +421,25 @@ def _shl(expr: str, k: int) -> str:
 
 
 def _csa_stages(n: int) -> list[tuple[list[tuple[int, int, int, int, int]], list[int]]]:
-    """Carry-save reduction of n operands to two, CSA_LEVELS levels a clock: per clock its
-    steps and the operands it registers (the next clock's operands 0 .. k-1, in that order)."""
+    """Carry-save reduction of n operands to two (or one), three at a time, level by level,
+    CSA_LEVELS levels a clock: per clock its steps (a, b, c, sum, carry; new operands numbered
+    from the clock's count) and the operands it registers, the next clock's 0 .. k-1 in order."""
     out = []
     while True:
-        levels, final = _csa_levels(n)
-        part = levels[:CSA_LEVELS]
-        left = final if len(levels) <= CSA_LEVELS else _alive(n, part)
-        out.append(([s for lv in part for s in lv], left))
-        if len(levels) <= CSA_LEVELS:
+        ops, nxt, steps = list(range(n)), n, []
+        for _ in range(CSA_LEVELS):
+            if len(ops) <= 2:
+                break
+            new = []
+            for g in range(0, len(ops) - len(ops) % 3, 3):
+                steps.append((ops[g], ops[g + 1], ops[g + 2], nxt, nxt + 1))
+                new += [nxt, nxt + 1]
+                nxt += 2
+            ops = new + ops[len(ops) - len(ops) % 3:]
+        out.append((steps, ops))
+        if len(ops) <= 2:
             return out
-        n = len(left)
-
-
-def _csa_levels(n: int) -> tuple[list[list[tuple[int, int, int, int, int]]], list[int]]:
-    """Carry-save reduction of operands 0 .. n-1 to two: per level its steps (a, b, c, sum,
-    carry), new operands numbered from n, three at a time; and the two (or one) left."""
-    ops, nxt, levels = list(range(n)), n, []
-    while len(ops) > 2:
-        new, steps = [], []
-        for g in range(0, len(ops) - len(ops) % 3, 3):
-            steps.append((ops[g], ops[g + 1], ops[g + 2], nxt, nxt + 1))
-            new += [nxt, nxt + 1]
-            nxt += 2
-        levels.append(steps)
-        ops = new + ops[len(ops) - len(ops) % 3:]
-    return levels, ops
-
-
-def _alive(n: int, levels: list[list[tuple[int, int, int, int, int]]]) -> list[int]:
-    """The operands left after these levels of _csa_levels(n)."""
-    ops = list(range(n))
-    for steps in levels:
-        used = {x for s in steps for x in s[:3]}
-        ops = [o for s in steps for o in s[3:]] + [o for o in ops if o not in used]
-    return ops
+        n = len(ops)
 
 
 def _to(fmt: Format) -> tuple[int, int]:
@@ -471,8 +455,9 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
 
     Six steps: 1 the noise products e s_w, e s_a and C(q)'s products q_a q_b (old q);
     2 omega', a' and C(q) rounded; 3 omega' dt/2 and C_nm a'_m; 4 h and f = C a' + g rounded;
-    5 h_k q_j and f dt; 6 q' and v' rounded: nine clocks, a product step's parts, the
-    following sums' carry-save reduction (the products' parts their terms), their rounding.
+    5 h_k q_j and f dt; 6 q' and v' rounded. A clock for a product step's parts, one or more
+    for the following sums' carry-save reduction (the products' parts their terms), one for
+    their rounding; the wrapper's output register one more (the context's latency).
     Every sum's signs and indices come from the model's own tables (_OMEGA_Q, _ROT), every
     width from the exact ranges of its terms.
     """
