@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import re
 import shutil
 from pathlib import Path
@@ -14,7 +15,7 @@ import pytest
 from gpf.config import load_config
 from gpf.model import grng as grng_model
 from gpf.model.grng import GrngModel
-from gpf.rtl.generate import MODULES, TEMPLATE_DIR, generate
+from gpf.rtl.generate import CSA_LEVELS, MODULES, TEMPLATE_DIR, _csa_stages, generate
 from gpf.rtl.lint import lint_files
 
 
@@ -204,3 +205,34 @@ def test_harness_outside_the_ip(tmp_path: Path) -> None:
     for listing in tmp_path.glob("*.f"):
         assert "harness" not in listing.read_text(), listing.name
     assert not any("harness" in p.name for files in out.files.values() for p in files)
+
+
+@pytest.mark.parametrize("n", range(1, 31))
+def test_carry_save_plan_keeps_the_sum_within_its_levels_a_clock(n: int) -> None:
+    """propagate_uav's sums: the plan's 3:2 steps, run on random words clock by clock (each
+    clock's registered operands renumbered 0 .. k-1 for the next), end in at most two words
+    whose sum is the terms' modulo 2^w, each clock at most CSA_LEVELS levels deep."""
+    w, rng = 40, random.Random(n)
+    mask = (1 << w) - 1
+    terms = [rng.getrandbits(w) for _ in range(n)]
+    words, plan = terms, _csa_stages(n)
+    for steps, kept in plan:
+        vals = dict(enumerate(words))
+        depth = dict.fromkeys(vals, 0)
+        for a, b, c, so, co in steps:
+            x, y, z = vals[a], vals[b], vals[c]
+            vals[so] = x ^ y ^ z
+            vals[co] = (((x & y) | (x & z) | (y & z)) << 1) & mask
+            depth[so] = depth[co] = 1 + max(depth[a], depth[b], depth[c])
+        assert max(depth.values()) <= CSA_LEVELS
+        words = [vals[k] for k in kept]
+    assert len(words) <= 2 and sum(words) & mask == sum(terms) & mask
+    assert len(plan) == max(1, -(-_levels(n) // CSA_LEVELS))
+
+
+def _levels(n: int) -> int:
+    """3:2 levels from n operands to two."""
+    k = 0
+    while n > 2:
+        n, k = 2 * (n // 3) + n % 3, k + 1
+    return k
