@@ -394,7 +394,8 @@ def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, in
         for p in ops:
             p["fold"] = False
         # the constant in the zero low bits of an added term shifted past it, if there is one
-        fold = next((p for p in ops if not p["neg"] and const < 1 << p["shift"]), None)
+        fold = (next((p for p in ops if not p["neg"] and const < 1 << p["shift"]), None)
+                if const else None)
         if fold is not None:
             fold["fold"] = True
         ln.update({"terms": ops, "nneg": nneg, "const": const, "folded": fold is not None})
@@ -408,8 +409,8 @@ def _split_sums(lines: list[dict[str, Any]], parts: dict[str, list[tuple[str, in
         stages[0].append({"carry_save": c})
         for k in range(1, depth):
             terms = [{"neg": False, "name": f"{names[k - 1]}_c{j}_q", "w": head["sw"], "shift": 0,
-                      "fold": j == 0} for j in range(len(plan[k - 1][1]))]   # ORs in a 0
-            c = {**head, "terms": terms, "half": 0, "nneg": 0, "const": 0, "folded": True,
+                      "fold": False} for j in range(len(plan[k - 1][1]))]
+            c = {**head, "terms": terms, "const": 0, "folded": False,   # the constant went in first
                  "csa": plan[k][0], "final": plan[k][1], "base": names[k]}
             stages[k].append({"carry_save": c})
         head["final"] = c["final"]
