@@ -135,6 +135,23 @@ def _sat_word(raw: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     return out, _marks(flag, Flag.SAT)
 
 
+def half_angles(dp: Datapath, e: np.ndarray, omega: np.ndarray
+                ) -> tuple[list[np.ndarray], np.ndarray | int]:
+    """propagate_uav's h_k = omega'_k dt/2 (one word, dp.h_frac fraction bits), omega' = omega
+    + s_w e_g rounded to dp.gyro; e (N, >= 3) draws, omega raw (3,) or one row per particle.
+    Returns ([h0, h1, h2], flags)."""
+    c, fe, fg, flags = dp.consts, dp.noise.frac_bits, dp.gyro.frac_bits, 0
+    h = []
+    for k in range(3):
+        wk, f1 = round_sum([(omega[..., k], fg), cmul(e[:, k], fe, c["s_w"])], dp.gyro)
+        prod, frac = cmul(wk, fg, c["dt2"])
+        hk, f2 = _sat_word(shift_round(prod, frac - dp.h_frac, "half_up",
+                                       width=MODEL_SUM_BITS), dp.word)
+        h.append(hk)
+        flags |= f1 | f2
+    return h, flags
+
+
 def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
                   accel: np.ndarray, per_particle: bool = False
                   ) -> tuple[np.ndarray, np.ndarray | int]:
@@ -147,17 +164,10 @@ def propagate_uav(dp: Datapath, x: np.ndarray, e: np.ndarray, omega: np.ndarray,
     rounding); C_nm = sum +-c q_a q_b (one rounding, dp.rot); f_n = sum_m C_nm a'_m + g_n (one
     rounding, dp.accel); v'_n = v_n + f_n dt (one rounding). C uses the old q.
     """
-    c, fe, flags = dp.consts, dp.noise.frac_bits, 0
+    c, fe = dp.consts, dp.noise.frac_bits
     omega, accel = np.asarray(omega, dtype=np.int64), np.asarray(accel, dtype=np.int64)
-    fg, fa, fq = dp.gyro.frac_bits, dp.accel.frac_bits, dp.x[0].frac_bits
-    h = []
-    for k in range(3):
-        wk, f1 = round_sum([(omega[..., k], fg), cmul(e[:, k], fe, c["s_w"])], dp.gyro)
-        prod, frac = cmul(wk, fg, c["dt2"])
-        hk, f2 = _sat_word(shift_round(prod, frac - dp.h_frac, "half_up",
-                                       width=MODEL_SUM_BITS), dp.word)
-        h.append(hk)
-        flags |= f1 | f2
+    fa, fq = dp.accel.frac_bits, dp.x[0].frac_bits
+    h, flags = half_angles(dp, e, omega)
     a = []
     for m in range(3):
         am, f = round_sum([(accel[..., m], fa), cmul(e[:, 3 + m], fe, c["s_a"])],

@@ -209,14 +209,29 @@ def corners(dp: Datapath) -> list[Corner]:
     out.append(("most negative words everywhere",
                 *rows((qf.min_raw,) * 4, (vmin,) * 3, (emin,) * N_E),
                 [gmin] * 3, [amin] * 3, True))
+    omega0 = half_way_omega(dp)
+    out.append(("q'_0 = -h_0 q_1 exactly half way between two outputs (its rounding constant)",
+                *rows((0, one, 0, 0), (0,) * 3), [omega0, 0, 0], g_up, False))
     return out
+
+
+def half_way_omega(dp: Datapath) -> int:
+    """A gyro word whose h_0 puts q'_0 = -h_0 q_1 (q = (0, 1, 0, 0), no draws) exactly half way
+    between two outputs: h_0 2^f_q an odd multiple of 2^(h_frac - 1), where only the rounding
+    constant decides (a constant off by the negated terms' count rounds it the other way)."""
+    a = dp.h_frac - 1 - dp.x[0].frac_bits
+    omega = np.arange(1, 1 << 16, dtype=np.int64)
+    rows = np.zeros((len(omega), 3), dtype=np.int64)
+    h0 = blocks.half_angles(dp, rows, np.column_stack([omega, rows[:, :2]]))[0][0]
+    return int(omega[np.flatnonzero(h0 % (2 << a) == 1 << a)[0]])
 
 
 @cocotb.test()
 async def test_corners(dut: SimHandleBase) -> None:
     """One step per corner (its own omega and accel): zero state, velocity pushed past either
     end of its format (and pulled back from it), omega' and a' past either end, f = C a' + g
-    and C(q) past their formats, q' past its end, extreme draws, full-range words. Each
+    and C(q) past their formats, q' past its end, extreme draws, full-range words, q'_0
+    exactly half way between two outputs (only its rounding constant decides). Each
     corner's saturation is checked against the model row by row, and the ones built to
     saturate must."""
     b = bench()
