@@ -844,19 +844,20 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         rb = (y_w + 1) // 2                           # root bits, one a clock
         qbound = -(-(1 << (fq + g + 1)) // ((1 << (g + 1)) - 1)) + 1  # 2^fq / (1 - 2^-(g+1))
         qd = _div_params(word, rb, fq + g, qbound)
-        # mu registered, its copies beside the squares' multipliers, the partial products, the
-        # squares, their sum
-        t_sqrt = t_mean + 5
+        # mu's sum registered before its saturation, mu registered, its copies beside the
+        # squares' multipliers, the partial products, the squares, their sum
+        t_sqrt = t_mean + 6
         dg = rb + rb % 2                              # root bits, two a clock (radix 4)
         t_qdiv = t_sqrt + 1 + dg // 2 + 1             # the dividends' norm terms registered
-        t_load = max(t_load, t_qdiv + 1 + qd["qb"])
+        t_load = max(t_load, t_qdiv + 2 + qd["qb"])     # the quotients registered once more
         # xc7: mu_i on the DSP48E1's wide port, one product a square (its top bits a shifted add)
         sq_wide = DSP_WIDTH < word <= DSP_WIDE_OPERAND[cfg.family]
         ctx.update(n2_w=n2_w, root_bits=rb, dg=dg, sq_shift=2 * g + 2, sq_wide=sq_wide,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    # the flush, input, dx, w dx, p, p dx, lane sums, the beat's x shifted into the frame beside
-    # the loop's shift, the loop's add, the two accumulators read out (registered), their sum
-    acc_stages = 12
+    # the flush, input, dx, w dx, p, p dx, its copy in the fabric, lane sums, the beat's x shifted
+    # into the frame beside the loop's shift, the loop's add, the two accumulators read out
+    # (registered), their sum
+    acc_stages = 13
     # p dx_j as DSP-sized partial products (one multiplier each, both operands within its
     # signed ports), summed with the lanes: p whole on the wide port (xc7: P_BITS fits the
     # DSP48E1's 25) or in unsigned pieces and a signed top (ECP5: 17 + 8 bits), dx whole or,
@@ -904,7 +905,8 @@ def moments_context(cfg: Config) -> dict[str, Any]:
                      for k, side in enumerate("ab")},
         "dsp_w": DSP_WIDTH,
         "fb": 4,                                      # accumulator frames: 2^fb, shifts by 16 k
-        "latency": acc_stages + t_load + 1, "covariance": cfg.covariance,
+        # w dx split: its parts' copies in the fabric, a clock more
+        "latency": acc_stages + w_top["split"] + t_load + 1, "covariance": cfg.covariance,
     })
     return ctx
 

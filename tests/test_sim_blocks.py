@@ -188,10 +188,9 @@ MUTANTS = {
     # the mean floored instead of rounded half up
     "moments-mean-rounding": ("moments", "moments.sv.j2",
                               "\"$signed({ref%d_q, 1'b1})\"", "\"$signed({ref%d_q, 1'b0})\""),
-    # the rescale of the sums drops its rounding half when the new frame is not 0
+    # the rescale of the sums floors: its rounding bit c = acc[S - 1] never added
     "moments-rescale-rounding": ("moments", "moments.sv.j2",
-                                 "{{ name }}_rb3p_q <= !{{ name }}_fd",
-                                 "{{ name }}_rb3p_q <= 1'b0"),
+                                 "{{ w }}'({{ name }}_cin);", "{{ w }}'({{ name }}_cin & 1'b0);"),
     # an accumulator rescaled by its own beat's shift only, not the other's since its last beat
     "moments-shift-since": ("moments", "moments.sv.j2",
                             "{{ tw }}'({{ sp }}) + ", ""),
@@ -215,13 +214,13 @@ MUTANTS = {
     "moments-wdx-split": ("moments", "moments.sv.j2",
                           "(sext('wh3_%d_%d_q' % (l, i), W + 1, wdx_w), lo),",
                           "(sext('wh3_%d_%d_q' % (l, i), W + 1, wdx_w), lo + 1),"),
-    # the read-out takes the frame of the accumulator in b_q from a clock before
-    "moments-readout-frame": ("moments", "moments.sv.j2",
-                              "{{ name }}_e6_q : {{ name }}_eo_q;",
-                              "{{ name }}_e6_q : {{ name }}_ef_q;"),
-    # a frame shift's carry (the bit under the new frame) never added
-    "moments-frame-carry": ("moments", "moments.sv.j2",
-                            "&& {{ name }}_xe[{{ j * F + F - 1 }}])", "&& 1'b0)"),
+    # the rescale's rounding bit for a shift of 4 a taken one place low, acc[4 a - 2]
+    "moments-round-bit": ("moments", "moments.sv.j2",
+                          "2'b00} - 1'b1;", "2'b00} - 2'd2;"),
+    # a clock without a beat shifts the accumulator in b_q by whatever the shift bus held
+    "moments-idle-shift": ("moments", "moments.sv.j2",
+                           "{{ name }}_s4_q <= {{ name }}_v3p_q && !{{ name }}_fd3p_q ?",
+                           "{{ name }}_s4_q <= !{{ name }}_fd3p_q ?"),
     # m_i m_j (one multiplier, the pairs in turn) loaded into each pair's register a slot early
     "moments-pair-slot": ("moments", "moments.sv.j2",
                           "if (mms_q[{{ loop.index0 + mm_lat - 1 }}])",
@@ -339,7 +338,7 @@ MUTANTS_IN_REGRESS = (
     "grng-fifo-depth", "grng-lane-run",
     "moments-rescale-rounding", "moments-shift-since", "moments-flush-weight", "moments-parity",
     "moments-sigma-rounding", "moments-divider-carry", "moments-root-digit", "moments-wdx-split",
-    "moments-readout-frame", "moments-frame-carry", "moments-pair-slot", "moments-p-rounding",
+    "moments-round-bit", "moments-idle-shift", "moments-pair-slot", "moments-p-rounding",
     "moments-quaternion-square", "moments-reach",
     "weight-absolute", "weight-min-per-step",
     "sigma_predict-saturation", "sigma_predict-entry-write",
