@@ -854,9 +854,9 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         sq_wide = DSP_WIDTH < word <= DSP_WIDE_OPERAND[cfg.family]
         ctx.update(n2_w=n2_w, root_bits=rb, dg=dg, sq_shift=2 * g + 2, sq_wide=sq_wide,
                    qdiv=qd, t_sqrt=t_sqrt, t_qdiv=t_qdiv, q_fmt=str(dp.x[0]))
-    # the flush, input, dx, w dx, p, p dx, its copy in the fabric, lane sums, the beat's x shifted
-    # into the frame beside the loop's shift, the loop's add, the two accumulators read out
-    # (registered), their sum
+    # the flush, input, dx, w dx, p, p dx, its copy in the fabric, lane sums, the beat's x
+    # registered beside the loop's coarse shift, the loop's fine shift and add, the two
+    # accumulators read out (registered), their sum
     acc_stages = 13
     # p dx_j as DSP-sized partial products (one multiplier each, both operands within its
     # signed ports), summed with the lanes: p whole on the wide port (xc7: P_BITS fits the
@@ -904,7 +904,6 @@ def moments_context(cfg: Config) -> dict[str, Any]:
         "mm_slots": {side: [[r for r, pr in enumerate(pairs) if pr[k] == i] for i in range(n)]
                      for k, side in enumerate("ab")},
         "dsp_w": DSP_WIDTH,
-        "fb": 4,                                      # accumulator frames: 2^fb, shifts by 16 k
         # w dx split: its parts' copies in the fabric, a clock more
         "latency": acc_stages + w_top["split"] + t_load + 1, "covariance": cfg.covariance,
     })
