@@ -713,7 +713,9 @@ def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
     reads it as one case table of {j, c}: no adder or compare between the counters and the
     index registers). Row a = j + 1 + c against column j while c <= n - 1 - j (c = n - 1 - j:
     row j + 1 against itself, the next pivot's partial sum); each value at the template's widths.
-    Sigma's and L's entry (a, b) sits at a n + b."""
+    Sigma's and L's entry (a, b) sits at a n + b; the operands' rows as row numbers (arow,
+    jrow: a row past the last reads as row 0, its base's default), each operand k an n-way
+    select of L_rk by them (no adder of base and k in front of it)."""
     n, jw, cw, tw = core["n"], core["jw"], core["cw"], core["tw"]
     row_w = jw + 1
 
@@ -729,7 +731,7 @@ def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
             row = (j + 1 + (0 if part else c % (1 << row_w))) % (1 << row_w)
             col = (j + part) % (1 << row_w)
             table.append({"key": (j << cw) | c, "ok": int(j < n - 1 and c <= left % (1 << cw)),
-                          "abase": row_base(row), "jbase": row_base(col),
+                          "arow": row_base(row) // n, "jrow": row_base(col) // n,
                           "sidx": (row_base(row) + col % (1 << tw)) % (1 << tw)})
     return table
 

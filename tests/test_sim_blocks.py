@@ -269,11 +269,23 @@ MUTANTS = {
                               "<<< {{ lo + 1 }});", "<<< {{ lo }});"),
     # 2 num + L_jj's high part not carried into from its low W + 1 bits
     "cholesky-dnum-carry": ("cholesky", "cholesky_core.sv.j2",
-                            "dlo[{{ r }}][W+1] ? nhi1_q[{{ r }}] : nhi_q[{{ r }}]",
-                            "nhi_q[{{ r }}]"),
+                            "dlo[{{ r }}][W+1] ? mh1_q[{{ r }}] : mh0_q[{{ r }}]",
+                            "mh0_q[{{ r }}]"),
     "cholesky-quotient-sign": ("cholesky", "cholesky_core.sv.j2",
                                "(neg_q[{{ r }}] ? ~qv[{{ r }}] : qv[{{ r }}])",
                                "(neg_q[{{ r }}] ? -qv[{{ r }}] : qv[{{ r }}])"),
+    # M's bits above the divider's remainder dropped from the saturation test (M >= L_jj 2^W,
+    # compared as {mtop_q, rem_q, mlo_q}: the load's registers hold M's low QB + DW bits)
+    "cholesky-sat-overflow": ("cholesky", "cholesky_core.sv.j2",
+                              "mtop_q[r] <= {{ mt }}'(mag[r] >> (QB + {{ dw }}));",
+                              "mtop_q[r] <= '0;"),
+    # the root's remainder not cleared between columns (its clear is a synchronous reset)
+    "cholesky-root-clear": ("cholesky", "cholesky_core.sv.j2",
+                            "if (rst || (busy_q && !done_q && ph_rad_q)) begin",
+                            "if (rst) begin"),
+    # column 0's L entries written in every column (the column one-hot's bit not read)
+    "cholesky-column-write": ("cholesky", "cholesky_core.sv.j2",
+                              "          if (col_q[{{ b }}]) begin", "          if (1'b1) begin"),
     # a dot product's term with the wrong weight: the four-part shape's aL bH a bit too high
     "cholesky-dot-term": ("cholesky", "cholesky_core.sv.j2",
                           "lh_q[\" ~ k ~ \"]\", w + 1, acc_w) }} <<< LO;",
@@ -344,7 +356,7 @@ MUTANTS_IN_REGRESS = (
     "sigma_predict-saturation", "sigma_predict-entry-write",
     "cholesky-pivot-square", "cholesky-dnum-carry", "cholesky-quotient-sign", "cholesky-dot-term",
     "cholesky-dot-sub", "cholesky-pivot-square-xc7", "cholesky-dot-term-xc7",
-    "cholesky-stall-last",
+    "cholesky-stall-last", "cholesky-sat-overflow", "cholesky-root-clear", "cholesky-column-write",
 )
 
 
