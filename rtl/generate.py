@@ -714,14 +714,14 @@ def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
     index registers). Row a = j + 1 + c against column j while c <= n - 1 - j (c = n - 1 - j:
     row j + 1 against itself, the next pivot's partial sum); each value at the template's widths.
     Sigma's and L's entry (a, b) sits at a n + b; the operands' rows as row numbers (arow,
-    jrow: a row past the last reads as row 0, its base's default), each operand k an n-way
-    select of L_rk by them (no adder of base and k in front of it)."""
+    jrow: a row past the last reads as row 0), each operand k an n-way select of L_rk by them
+    (no adder of a row's base and k in front of it)."""
     n, jw, cw, tw = core["n"], core["jw"], core["cw"], core["tw"]
     row_w = jw + 1
 
-    def row_base(r: int) -> int:
+    def row_of(r: int) -> int:   # a row past the last reads as row 0
         r %= 1 << tw
-        return r * n if r < n else 0
+        return r if r < n else 0
 
     table = []
     for j in range(n):
@@ -731,8 +731,8 @@ def _chol_issue_table(core: dict[str, Any]) -> list[dict[str, int]]:
             row = (j + 1 + (0 if part else c % (1 << row_w))) % (1 << row_w)
             col = (j + part) % (1 << row_w)
             table.append({"key": (j << cw) | c, "ok": int(j < n - 1 and c <= left % (1 << cw)),
-                          "arow": row_base(row) // n, "jrow": row_base(col) // n,
-                          "sidx": (row_base(row) + col % (1 << tw)) % (1 << tw)})
+                          "arow": row_of(row), "jrow": row_of(col),
+                          "sidx": (row_of(row) * n + col % (1 << tw)) % (1 << tw)})
     return table
 
 
