@@ -13,8 +13,8 @@ from gpf.model.formats import SHIFT_BITS, datapath
 from gpf.model.grng import COMPONENTS
 
 CYCLES_W = 32          # the step's cycle count in the output beat
-FIFO_DEPTH_LOG2 = 4    # process draws waiting beside sample_cond (its latency 8, its slice's 2, 1)
-SLICE_BEATS = 2        # a register slice (gpf_slice) holds up to two beats
+FIFO_DEPTH_LOG2 = 4    # process draws waiting beside sample_cond (its pipeline 8, its output 2, 1)
+OUTBUF_BEATS = 2       # a line-rate block's output buffer (gpf_outbuf) holds up to two beats
 EXAMPLE_CLOCK_MHZ = 125   # the example top's clock constraint: SPEC 9's bar
 STEP_FIELDS = {"bot": ["z", "ox", "oy"],
                "uav": ["omega0", "omega1", "omega2", "accel0", "accel1", "accel2",
@@ -57,7 +57,8 @@ def filter_context(cfg: Config) -> dict[str, Any]:
         "cholesky out = {flags, L}": chol["out_width"] == l_w + 3,
         "sigma_predict = {flags, Sigma}": pred["in_width"] == sig_w
         and pred["out_width"] == sig_w + 3,
-        "FIFO covers sample_cond": sc["latency"] + SLICE_BEATS + 1 <= 1 << FIFO_DEPTH_LOG2,
+        "FIFO covers sample_cond": sc["lane_latency"] + OUTBUF_BEATS + 1
+        <= 1 << FIFO_DEPTH_LOG2,
     }
     broken = [name for name, ok in checks.items() if not ok]
     if broken:

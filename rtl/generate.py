@@ -39,6 +39,7 @@ from gpf.rtl.regs import ICARUS_GAP, register_files
 
 TEMPLATE_DIR = Path(__file__).parent / "templates"
 DSP_WIDTH = 18         # an ECP5 MULT18X18D operand
+OUTBUF_LATENCY = 1     # a line-rate block's output buffer (gpf_outbuf) after its pipeline
 # the widest signed operand one multiplier takes beside an 18-bit one, per FPGA family
 # (config filter.family): a DSP48E1's 25 x 18, a MULT18X18D's 18 x 18
 DSP_WIDE_OPERAND = {"xc7": 25, "ecp5": 18}
@@ -555,7 +556,8 @@ def propagate_uav_context(cfg: Config) -> dict[str, Any]:
     widths = [fmt.width for fmt in dp.x]
     add(s5, s6)
     return {
-        "lanes": cfg.lanes, "latency": len(stages) + 1, "lane_latency": len(stages),
+        "lanes": cfg.lanes, "latency": len(stages) + OUTBUF_LATENCY,
+        "lane_latency": len(stages),
         "x_fmts": [str(f) for f in dp.x], "x_widths": widths,
         "x_offsets": [sum(widths[:i]) for i in range(len(widths))], "x_width": sum(widths),
         "q_width": dp.x[0].width, "v_width": dp.x[4].width,
@@ -697,7 +699,8 @@ def sample_cond_context(cfg: Config) -> dict[str, Any]:
     x_off = mu_off     # the output lane packs x like mu, then sat
     return {
         # the operands' registers, the products twice, the adder levels, the rounding
-        "lanes": cfg.lanes, "latency": len(levels) + 4, "n": n,
+        "lanes": cfg.lanes, "lane_latency": len(levels) + 4,
+        "latency": len(levels) + 4 + OUTBUF_LATENCY, "n": n,
         "noise_width": noise.width, "noise_fmt": str(noise),
         "in_width": n * noise.width, "out_width": mu_w + 1, "x_width": mu_w,
         "op_width": offset, "mu_width": mu_w, "chol_width": offset - mu_w,
@@ -750,7 +753,7 @@ def propagate_bot_context(cfg: Config) -> dict[str, Any]:
 
     whole = (x.min_raw, x.max_raw, x.frac_bits)
     return {
-        "lanes": cfg.lanes, "latency": 3,
+        "lanes": cfg.lanes, "lane_latency": 3, "latency": 3 + OUTBUF_LATENCY,
         "x_width": x.width, "x_fmt": str(x), "noise_width": noise.width,
         "noise_fmt": str(noise),
         "in_width": 4 * x.width + 2 * noise.width, "out_width": 4 * x.width + 1,
@@ -959,8 +962,9 @@ def _weight_block(cfg: Config, lane: dict[str, Any], lane_latency: int) -> dict[
     """A weight block's context: its lanes' (up to t), stage M and the exp lanes."""
     dp = datapath(cfg)
     lane_w = dp.n * dp.word + dp.weight.width + 1
+    pipe_latency = lane_latency + 1 + lane["exp_latency"]
     return {**lane, "lanes": cfg.lanes, "components": dp.n, "lane_latency": lane_latency,
-            "latency": lane_latency + 1 + lane["exp_latency"],
+            "pipe_latency": pipe_latency, "latency": pipe_latency + OUTBUF_LATENCY,
             "out_width": cfg.lanes * lane_w + SHIFT_BITS}
 
 
@@ -1183,15 +1187,15 @@ def example_constraints(env: jinja2.Environment, context: dict[str, Any]) -> dic
 MODULES: dict[str, Module] = {
     # the filter's blocks in stream order, then the primitives they instantiate
     "grng": Module("grng", ("grng_lfsr258", "grng_icdf", "gpf_fifo", "grng"), grng_context),
-    "sample_cond": Module("sample_cond", ("sample_cond_lane", "sample_cond"),
+    "sample_cond": Module("sample_cond", ("gpf_outbuf", "sample_cond_lane", "sample_cond"),
                           sample_cond_context),
-    "propagate_bot": Module("propagate_bot", ("propagate_bot_lane", "propagate_bot"),
+    "propagate_bot": Module("propagate_bot", ("gpf_outbuf", "propagate_bot_lane", "propagate_bot"),
                             propagate_bot_context, apps=("bot",)),
-    "propagate_uav": Module("propagate_uav", ("propagate_uav_lane", "propagate_uav"),
+    "propagate_uav": Module("propagate_uav", ("gpf_outbuf", "propagate_uav_lane", "propagate_uav"),
                             propagate_uav_context, apps=("uav",)),
-    "weight_bot": Module("weight_bot", ("weight_bot_lane", "weight_bot"), weight_bot_context,
+    "weight_bot": Module("weight_bot", ("gpf_outbuf", "weight_bot_lane", "weight_bot"), weight_bot_context,
                          uses=("cordic_atan2", "exp"), apps=("bot",)),
-    "weight_uav": Module("weight_uav", ("weight_uav_lane", "weight_uav"), weight_uav_context,
+    "weight_uav": Module("weight_uav", ("gpf_outbuf", "weight_uav_lane", "weight_uav"), weight_uav_context,
                          uses=("exp",), apps=("uav",)),
     "moments": Module("moments", ("moments_div", "moments"), moments_context),
     "cholesky": Module("cholesky", ("cholesky_core", "cholesky"), cholesky_context, laned=False),

@@ -309,6 +309,10 @@ MUTANTS = {
     "cholesky-stall-last": ("cholesky", "cholesky.sv.j2", "assign m_axis_tlast = m_last_q;",
                             "assign m_axis_tlast = m_last_q ^ (m_axis_tvalid "
                             "&& !m_axis_tready);"),
+    # a line-rate block's output buffer: the read pointer does not move on a pop, so the bus
+    # shows one word twice and skips the next
+    "outbuf-read-pointer": ("sample_cond", "gpf_outbuf.sv.j2", "rd_q <= rd_q ^ pop;",
+                            "rd_q <= rd_q;"),
     # the GRNG's FIFO shows a sample's LSB flipped until it is popped (StreamMonitor's checks)
     "grng-stall-data": ("grng", "gpf_fifo.sv.j2", "assign pop_data = mem[rd_q];",
                         "assign pop_data = mem[rd_q] ^ WIDTH'(!pop);"),
