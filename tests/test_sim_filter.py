@@ -305,8 +305,8 @@ FILTER_MUTANTS = {
     "ctrl-low-ess-frozen": ("ctrl", "ctrl.sv.j2", "sigma_new_q <= sigma_pred_q;",
                             "sigma_new_q <= sigma_q;", None,
                             {"filter.ess_min": 1}),
-    "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "            sticky_q <= sticky_q | flags_q;",
-                    "            sticky_q <= flags_q;", "bot_outlier", {}),
+    "ctrl-sticky": ("ctrl", "ctrl.sv.j2", "        sticky_q <= sticky_q | flags_q;",
+                    "        sticky_q <= flags_q;", "bot_outlier", {}),
     # a register slice between blocks loses the beat it holds in its skid under backpressure
     "slice-skid": ("gpf_slice", "gpf_slice.sv.j2", "m_data <= skid_q ? skid_data_q : s_data;",
                    "m_data <= s_data;", None, {}, "test_stalls"),
