@@ -109,7 +109,7 @@ MOMENTS_DRIVE = {"s_axis_tlast": "s_axis_tlast = $urandom % 64 == 0;",
 
 CASES: dict[str, Case] = {
     "exp-m": Case("exp", "exp_lane", "bot", exp_bases_zero, "exp_lane: m_d = "),
-    "exp-w": Case("exp", "exp_lane", "bot", exp_output_narrower, "exp_lane: (h_q + 1) >> 1 = ",
+    "exp-w": Case("exp", "exp_lane", "bot", exp_output_narrower, "exp_lane: (h + 1) >> 1 = ",
                   EXP_DRIVE),
     "grng-mag": Case("grng", "grng_icdf", "bot", grng_output_narrower, "grng_icdf: mag_wide = "),
     "propagate-uav-h": Case("propagate_uav", "propagate_uav_lane", "uav",
