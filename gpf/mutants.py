@@ -3,8 +3,8 @@
 Each mutant belongs to one target: the first (block, config) whose generated RTL holds the
 mutated text, or a whole filter (gpf_bot, gpf_uav) for the tops' own templates. It runs on
 Icarus against that block's own cocotb testbench (the whole filter's short `gpf run` for the
-tops), each in a child process with a wall-clock limit, at rising test levels while it
-survives, then against each other target whose RTL holds the text while it still survives.
+tops, then its reset half-way through a step), each in a child process with a wall-clock
+limit, at rising test levels while it survives, then against each other target whose RTL holds the text while it still survives.
 Verdicts: killed (a test failed, or an RTL check stopped the simulator with $fatal), survived,
 stillborn (the template did not render or the RTL did not compile: not scored) and hung (the
 wall clock ran out before the testbench's own timeouts saw anything: scored as a survivor).
@@ -227,7 +227,14 @@ def run_one(t: Target, template_dir: Path, build_root: Path, log: Path,
                                       f"{f' stall {stall}' if stall else ''}: "
                                       f"{res['mismatches']} mismatches, first: "
                                       f"{res.get('first_mismatch')}")
-            return "survived", f"the whole filter passed {len(runs)} runs"
+            # last, the testbench's reset half-way through a step (test_filter never resets
+            # mid-run: a register left out of the reset survived every run above)
+            res = run_sim(cfg, t.module, SIM, seed=1, testcase="test_reset_mid_step",
+                          template_dir=template_dir, build_root=build_root, log_file=log,
+                          all_modules=False, extra_env={"TEST_LEVEL": level, "GPF_FAIL_FAST": "1"})
+            if res.failed:
+                return "killed", "test_reset_mid_step failed"
+            return "survived", f"the whole filter passed {len(runs)} runs and a reset mid-step"
         res = run_sim(cfg, t.module, SIM, seed=1, template_dir=template_dir,
                       build_root=build_root, log_file=log, all_modules=False,
                       extra_env={"TEST_LEVEL": level, "GPF_FAIL_FAST": "1"})
