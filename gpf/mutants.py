@@ -4,7 +4,8 @@ Each mutant belongs to one target: the first (block, config) whose generated RTL
 mutated text, or a whole filter (gpf_bot, gpf_uav) for the tops' own templates. It runs on
 Icarus against that block's own cocotb testbench (the whole filter's short `gpf run` for the
 tops, then its reset half-way through a step), each in a child process with a wall-clock
-limit, at rising test levels while it survives, then against each other target whose RTL holds the text while it still survives.
+limit, at rising test levels while it survives, then against each other target whose RTL
+holds the text while it still survives.
 Verdicts: killed (a test failed, or an RTL check stopped the simulator with $fatal), survived,
 stillborn (the template did not render or the RTL did not compile: not scored) and hung (the
 wall clock ran out before the testbench's own timeouts saw anything: scored as a survivor).
