@@ -280,8 +280,7 @@ def test_result_held_catches_a_controller_that_does_not_wait(tmp_path: Path) -> 
     the held result (est_q's load enable, out_load_q's copy): the held beat changes under the
     testbench (an AXI4-Stream violation), or ctrl's simulation check of the copy stops it."""
     templates = mutated_templates(tmp_path, "ctrl-out-no-wait", "ctrl.sv.j2",
-                                  "est_load_q <= nx_out && !(est_valid_q && !m_est_tready);",
-                                  "est_load_q <= nx_out;")
+                                  "est_load_q <= out_load_d;", "est_load_q <= nx_out;")
     spec = held_spec(64)
     result = run_mutant("ctrl-out-no-wait", load_config("configs/bot.toml"), "gpf_bot", "icarus",
                         seed=spec["seed"], testcase="test_filter", template_dir=templates,
